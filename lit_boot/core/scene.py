@@ -1,0 +1,181 @@
+"""The scene: one video of one person, its pose estimates and optional ground truth.
+
+Shapes: T frames of H x W pixels; J 3D joints in ``joints3d_layout``; K 2D keypoints in
+``keypoints_layout``. Units: pixels (pixel centres at integer coordinates), millimetres in the
+camera frame (x right, y down, z forward). Flows are forward flows from frame t to t+1.
+
+Every field is checked on construction; a bad one raises :class:`SceneValidationError`
+naming the field and what was expected.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import torch
+
+from .cameras import Cameras
+from .joints import get_layout
+
+__all__ = ["Scene", "GroundTruth", "SceneValidationError"]
+
+
+class SceneValidationError(ValueError):
+    """A scene field has the wrong shape, dtype or values."""
+
+
+def _check(name: str, value: Any, shape: tuple, kind: str) -> None:
+    """Check a tensor's shape (None in ``shape`` = any size), dtype kind and finiteness."""
+    if not isinstance(value, torch.Tensor):
+        raise SceneValidationError(f"{name}: expected a torch.Tensor, got {type(value).__name__}")
+    want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
+    if value.ndim != len(shape) or any(s is not None and s != v for s, v in zip(shape, value.shape)):
+        raise SceneValidationError(f"{name}: expected shape {want}, got {tuple(value.shape)}")
+    if kind == "uint8" and value.dtype != torch.uint8:
+        raise SceneValidationError(f"{name}: expected dtype uint8, got {value.dtype}")
+    if kind == "bool" and value.dtype != torch.bool:
+        raise SceneValidationError(f"{name}: expected dtype bool, got {value.dtype}")
+    if kind == "float":
+        if not value.is_floating_point():
+            raise SceneValidationError(f"{name}: expected a floating-point dtype, got {value.dtype}")
+        if not torch.isfinite(value).all():
+            raise SceneValidationError(f"{name}: expected finite values, found NaN or inf")
+
+
+def _check_cameras(name: str, cameras: Any, T: int) -> None:
+    if not isinstance(cameras, Cameras):
+        raise SceneValidationError(f"{name}: expected a lit_boot Cameras, got {type(cameras).__name__}")
+    _check(f"{name}.params", cameras.params, (T, cameras.params.shape[1]), "float")
+    if cameras.crops is not None:
+        _check(f"{name}.crops", cameras.crops, (T, 3), "float")
+
+
+@dataclass
+class GroundTruth:
+    """Ground truth of a scene; every field is optional.
+
+    flow (T-1, 2, H, W) px, forward t -> t+1; flow_valid (T-1, H, W) bool (where the flow is
+    defined); flow_occluded (T-1, H, W) bool (pixels hidden in frame t+1); joints3d (T, J, 3) mm
+    camera frame and joints2d (T, J, 2) px in ``joints_layout``; cameras: the true cameras that
+    project joints3d to joints2d; person_mask (T, H, W) bool; keypoints2d (T, K, 2) px: the
+    true positions of the scene's 2D keypoints (in the scene's ``keypoints_layout``).
+    """
+
+    flow: torch.Tensor | None = None
+    flow_valid: torch.Tensor | None = None
+    flow_occluded: torch.Tensor | None = None
+    joints3d: torch.Tensor | None = None
+    joints2d: torch.Tensor | None = None
+    joints_layout: str = "lsp14"
+    cameras: Cameras | None = None
+    person_mask: torch.Tensor | None = None
+    keypoints2d: torch.Tensor | None = None
+
+    def validate(self, T: int, H: int, W: int, keypoints_layout: str = "coco17") -> None:
+        """Check every present field against the scene's T, H, W and keypoint layout."""
+        J = get_layout(self.joints_layout).num_joints
+        K = get_layout(keypoints_layout).num_joints
+        checks = {
+            "flow": ((T - 1, 2, H, W), "float"),
+            "flow_valid": ((T - 1, H, W), "bool"),
+            "flow_occluded": ((T - 1, H, W), "bool"),
+            "joints3d": ((T, J, 3), "float"),
+            "joints2d": ((T, J, 2), "float"),
+            "person_mask": ((T, H, W), "bool"),
+            "keypoints2d": ((T, K, 2), "float"),
+        }
+        for key, (shape, kind) in checks.items():
+            value = getattr(self, key)
+            if value is not None:
+                _check(f"GroundTruth.{key}", value, shape, kind)
+        if self.cameras is not None:
+            _check_cameras("GroundTruth.cameras", self.cameras, T)
+
+
+@dataclass
+class Scene:
+    """One video of one person with pose estimates and optional ground truth.
+
+    frames (T, 3, H, W) uint8 RGB; fps frames per second.
+    joints3d (T, J, 3) mm in the camera frame (root-relative when the camera model is
+    weak perspective), ``joints3d_layout`` names the joints; cameras: per-frame cameras.
+    keypoints2d (T, K, 2) px with keypoints_conf (T, K) in [0, 1] (0 = not detected).
+    """
+
+    frames: torch.Tensor
+    fps: float = 30.0
+    name: str = "scene"
+    joints3d: torch.Tensor | None = None
+    joints3d_layout: str = "lsp14"
+    cameras: Cameras | None = None
+    keypoints2d: torch.Tensor | None = None
+    keypoints_conf: torch.Tensor | None = None
+    keypoints_layout: str = "coco17"
+    gt: GroundTruth | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    @property
+    def num_frames(self) -> int:
+        return self.frames.shape[0]
+
+    @property
+    def height(self) -> int:
+        return self.frames.shape[2]
+
+    @property
+    def width(self) -> int:
+        return self.frames.shape[3]
+
+    def validate(self) -> None:
+        """Check all fields; raises :class:`SceneValidationError`."""
+        _check("Scene.frames", self.frames, (None, 3, None, None), "uint8")
+        T, _, H, W = self.frames.shape
+        if T < 1:
+            raise SceneValidationError("Scene.frames: expected at least one frame, got T=0")
+        if not (isinstance(self.fps, (int, float)) and self.fps > 0):
+            raise SceneValidationError(f"Scene.fps: expected a positive number, got {self.fps!r}")
+        for key in ("joints3d_layout", "keypoints_layout"):
+            try:
+                get_layout(getattr(self, key))
+            except ValueError as err:
+                raise SceneValidationError(f"Scene.{key}: {err}") from None
+        if self.joints3d is not None:
+            J = get_layout(self.joints3d_layout).num_joints
+            _check("Scene.joints3d", self.joints3d, (T, J, 3), "float")
+        if self.cameras is not None:
+            _check_cameras("Scene.cameras", self.cameras, T)
+        if (self.keypoints2d is None) != (self.keypoints_conf is None):
+            raise SceneValidationError("Scene.keypoints2d and Scene.keypoints_conf: give both or neither")
+        if self.keypoints2d is not None:
+            K = get_layout(self.keypoints_layout).num_joints
+            _check("Scene.keypoints2d", self.keypoints2d, (T, K, 2), "float")
+            _check("Scene.keypoints_conf", self.keypoints_conf, (T, K), "float")
+            if (self.keypoints_conf < 0).any() or (self.keypoints_conf > 1).any():
+                raise SceneValidationError("Scene.keypoints_conf: expected values in [0, 1]")
+        if self.gt is not None:
+            if not isinstance(self.gt, GroundTruth):
+                raise SceneValidationError(f"Scene.gt: expected a GroundTruth, got {type(self.gt).__name__}")
+            self.gt.validate(T, H, W, self.keypoints_layout)
+
+    def summary(self) -> str:
+        """A few human-readable lines describing the scene."""
+        T, H, W = self.num_frames, self.height, self.width
+        lines = [f"scene {self.name!r}: {T} frames, {W}x{H} px, {self.fps:g} fps"]
+        if self.joints3d is not None:
+            cam = f", cameras: {self.cameras.model}" if self.cameras is not None else ""
+            lines.append(f"  3D joints: {self.joints3d_layout} ({self.joints3d.shape[1]} joints){cam}")
+        if self.keypoints2d is not None:
+            mean_conf = self.keypoints_conf.float().mean().item()
+            lines.append(f"  2D keypoints: {self.keypoints_layout}, mean confidence {mean_conf:.2f}")
+        if self.gt is not None:
+            have = [k for k in ("flow", "flow_occluded", "joints3d", "joints2d", "keypoints2d", "person_mask", "cameras")
+                    if getattr(self.gt, k) is not None]  # fmt: skip
+            lines.append(f"  ground truth: {', '.join(have) if have else 'none'}")
+            if self.gt.flow is not None:
+                mag = self.gt.flow.norm(dim=1)
+                lines.append(f"  GT flow magnitude: mean {mag.mean().item():.2f} px, max {mag.max().item():.2f} px")
+        return "\n".join(lines)

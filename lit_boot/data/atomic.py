@@ -1,0 +1,105 @@
+"""Atomic writes: a file or a folder appears under its final name complete, or not at all.
+
+Everything is first written beside the target (same folder, hence same file system) under a
+hidden temporary name ``.<name>.<random>.partial`` and then renamed into place. An
+interrupted write leaves at most such a temporary entry behind, never a half-written target.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import uuid
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+__all__ = ["atomic_directory", "atomic_write_bytes"]
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (temporary file + fsync + ``os.replace``).
+
+    An existing file at ``path`` is replaced only once the new content is complete.
+    Returns the path.
+    """
+    path = Path(path)
+    tmp = _temp_name(path, "partial")
+    # os.open (not mkstemp) so that the file gets the usual permissions (0o666 minus umask)
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _temp_name(path: Path, kind: str) -> Path:
+    """A fresh hidden name beside ``path``: ``.<name>.<random>.<kind>``."""
+    return path.parent / f".{path.name}.{uuid.uuid4().hex[:12]}.{kind}"
+
+
+def _is_empty_dir(path: Path) -> bool:
+    return path.is_dir() and not path.is_symlink() and not any(path.iterdir())
+
+
+@contextmanager
+def atomic_directory(
+    path: str | os.PathLike,
+    *,
+    overwrite: bool = False,
+    may_replace: Callable[[Path], bool] | None = None,
+    replaceable: str = "replaceable",
+) -> Iterator[Path]:
+    """Build a folder in a temporary folder beside ``path``; rename it to ``path`` on success.
+
+    Yields the temporary folder to fill. If the block raises, the temporary folder is deleted
+    and ``path`` is untouched. An existing empty folder at ``path`` is always replaced; any
+    other existing entry raises :class:`FileExistsError`, unless ``overwrite`` is True and it
+    is a folder for which ``may_replace(path)`` is True (default: any folder); ``replaceable``
+    describes such folders in the error message ("a saved scene"). Replacing
+    renames the old folder aside, renames the new one in, then deletes the old one.
+    """
+    path = Path(path)
+    _check_target(path, overwrite, may_replace, replaceable)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _temp_name(path, "partial")
+    tmp.mkdir()
+    try:
+        yield tmp
+        _check_target(path, overwrite, may_replace, replaceable)  # it may have appeared meanwhile
+        _swap_in(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _check_target(path: Path, overwrite: bool, may_replace: Callable[[Path], bool] | None, replaceable: str) -> None:
+    if not os.path.lexists(path) or _is_empty_dir(path):
+        return
+    if not path.is_dir() or path.is_symlink():
+        raise FileExistsError(f"{path}: exists and is not a folder; refusing to replace it")
+    if not overwrite:
+        raise FileExistsError(f"{path}: folder exists and is not empty (pass overwrite=True to replace it)")
+    if may_replace is not None and not may_replace(path):
+        raise FileExistsError(f"{path}: refusing to overwrite a folder that is not {replaceable}")
+
+
+def _swap_in(tmp: Path, path: Path) -> None:
+    """Rename ``tmp`` to ``path``; an existing ``path`` is moved aside first and deleted last."""
+    if not os.path.lexists(path):
+        os.rename(tmp, path)
+        return
+    aside = _temp_name(path, "old")
+    os.rename(path, aside)
+    try:
+        os.rename(tmp, path)
+    except BaseException:
+        os.rename(aside, path)  # put the old one back
+        raise
+    shutil.rmtree(aside, ignore_errors=True)

@@ -1,0 +1,30 @@
+"""Test fixtures: where the shared real data and weights are.
+
+``../shared`` beside the project root (or ``$LIT_BOOT_SHARED``) holds real RAFT weights,
+Sintel samples, CMU BVH files and videos. Tests that need it take the ``shared`` fixture: it
+skips when the folder is absent, and fails instead when ``LIT_BOOT_REQUIRE_SHARED=1`` (CI).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def shared_dir() -> Path:
+    """The shared folder: $LIT_BOOT_SHARED, else ../shared beside the project root."""
+    return Path(os.environ.get("LIT_BOOT_SHARED", ROOT.parent / "shared"))
+
+
+@pytest.fixture(scope="session")
+def shared() -> Path:
+    path = shared_dir()
+    if not path.is_dir():
+        if os.environ.get("LIT_BOOT_REQUIRE_SHARED") == "1":
+            pytest.fail(f"LIT_BOOT_REQUIRE_SHARED=1 but the shared folder {path} is missing")
+        pytest.skip(f"needs ../shared: {path} is absent")
+    return path
