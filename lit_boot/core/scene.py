@@ -74,7 +74,10 @@ class GroundTruth:
 
     def validate(self, T: int, H: int, W: int, keypoints_layout: str = "coco17") -> None:
         """Check every present field against the scene's T, H, W and keypoint layout."""
-        J = get_layout(self.joints_layout).num_joints
+        try:
+            J = get_layout(self.joints_layout).num_joints
+        except ValueError as err:
+            raise SceneValidationError(f"GroundTruth.joints_layout: {err}") from None
         K = get_layout(keypoints_layout).num_joints
         checks = {
             "flow": ((T - 1, 2, H, W), "float"),

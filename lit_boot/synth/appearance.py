@@ -32,8 +32,8 @@ class Appearance:
     ):
         g = generator
         self.ambient = ambient
-        # Texels of about a pixel at the person's (the wall's) distance: the finest detail has
-        # a period of two pixels, so textures do not alias.
+        # Texel sizes are chosen by the caller from the image scale (the finest noise period
+        # is two texels), so textures do not alias.
         self.body_texel, self.bg_texel = body_texel_mm, background_texel_mm
         self.body_noise = periodic_noise((32, 32, 32), 3, g, beta=1.2)
         self.body_patch = periodic_noise((32, 32, 32), 1, g, beta=2.5)

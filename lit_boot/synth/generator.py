@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import torch
@@ -213,9 +213,9 @@ class _Renderer:
 
 def make_scene(config: SynthConfig | None = None, **overrides) -> Scene:
     """Generate a synthetic scene (see :class:`SynthConfig`; keyword overrides allowed)."""
-    cfg = SynthConfig(**overrides) if config is None else (SynthConfig(**{**asdict(config), **overrides}) if overrides else config)
+    cfg = replace(config or SynthConfig(), **overrides)
     if isinstance(cfg.estimates, dict):
-        cfg.estimates = EstimateConfig(**cfg.estimates)
+        cfg = replace(cfg, estimates=EstimateConfig(**cfg.estimates))
     g = torch.Generator().manual_seed(cfg.seed)
     frame_times, blur_times = _sample_times(cfg)
     T, S = blur_times.shape
@@ -233,9 +233,10 @@ def make_scene(config: SynthConfig | None = None, **overrides) -> Scene:
         None if cfg.camera_height_mm is None else floor_y + cfg.camera_height_mm,
         cfg.pan_deg_per_s, cfg.dolly_mm_per_s,
     )  # fmt: skip
+    # Texels of 1.5 px at the person's (the wall's) distance: the finest texture period is 3 px.
     mm_per_px = float((rig.C[:, 2] - (lo[2] + hi[2]) / 2).abs().mean()) / rig.K.fx
     wall_mm_per_px = mm_per_px + 2500.0 / rig.K.fx
-    look = Appearance(body.material, g, body_texel_mm=mm_per_px, background_texel_mm=wall_mm_per_px)
+    look = Appearance(body.material, g, body_texel_mm=1.5 * mm_per_px, background_texel_mm=1.5 * wall_mm_per_px)
     renderer = _Renderer(body, poses, rig, _world_planes(lo, hi, floor_y), look)
 
     H, W = cfg.height, cfg.width
@@ -293,6 +294,11 @@ def make_scene(config: SynthConfig | None = None, **overrides) -> Scene:
         "generator": "lit_boot.synth",
         "config": json.loads(json.dumps(asdict(cfg))),  # tuples -> lists: loads back identical
         "keypoint_failures": events,
+        "camera": {  # the true camera: x_cam = R @ (x_world - C); world axes x left, y up, z forward
+            "fx_fy_cx_cy": [K.fx, K.fy, K.cx, K.cy],
+            "world_to_camera_R": rig.R[:T].tolist(),
+            "centre_mm": rig.C[:T].tolist(),
+        },
     }
     return Scene(
         frames=frames, fps=cfg.fps, name=name, joints3d=est3d, joints3d_layout="lsp14", cameras=cams,
