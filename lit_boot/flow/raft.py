@@ -1,0 +1,104 @@
+"""RAFT models from torchvision, their input convention, and flow prediction.
+
+torchvision's RAFT takes RGB in [-1, 1] with sides divisible by 8 (its own size check has a
+precedence bug, so we pad ourselves) and at least 128 px (its correlation pyramid downsamples
+the 1/8 feature maps three more times). :func:`prepare_pair` turns uint8 (0..255) or float
+(0..1) RGB of any size into that, replicate-padding to a multiple of 8 and at least 128 px;
+:func:`predict_flow` returns the flow cropped back to the input size.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from torchvision.models.optical_flow import RAFT, raft_large, raft_small
+
+from .weights import ARCHS, load_state_dict_file, resolve_weights
+
+__all__ = ["load_raft", "prepare_pair", "predict_flow", "pad_to_multiple"]
+
+
+def load_raft(arch: str = "raft_small", weights: str | Path | None = "C_T_V1") -> RAFT:
+    """A torchvision RAFT (``raft_small`` or ``raft_large``) with ``weights``: a file path
+    (torchvision or original princeton-vl format), a torchvision weights name (``C_T_V1``,
+    ``C_T_V2``, ``C_T_SKHT_V2`` ...; looked up locally first, see :mod:`lit_boot.flow.weights`),
+    or None for random initialisation."""
+    if arch not in ARCHS:
+        raise ValueError(f"arch: expected one of {ARCHS}, got {arch!r}")
+    model = raft_small() if arch == "raft_small" else raft_large()
+    if weights is not None:
+        path = resolve_weights(arch, weights)
+        state = load_state_dict_file(path, arch)
+        result = model.load_state_dict(state, strict=False)
+        if result.missing_keys or result.unexpected_keys:
+            raise ValueError(
+                f"{path}: does not fit {arch}: missing {result.missing_keys[:5]}, unexpected {result.unexpected_keys[:5]}"
+            )
+    return model
+
+
+#: The smallest side RAFT accepts (feature maps of 16 at 1/8 resolution).
+MIN_SIZE = 128
+
+
+def pad_to_multiple(
+    images: torch.Tensor, multiple: int = 8, min_size: int = MIN_SIZE
+) -> tuple[torch.Tensor, tuple[int, int, int, int]]:
+    """Replicate-pad (B, C, H, W) so H and W are multiples of ``multiple`` and at least
+    ``min_size``, split evenly (the extra pixel at the bottom/right). Returns the padded tensor
+    and (left, right, top, bottom)."""
+    H, W = images.shape[-2:]
+    ph = max((-H) % multiple, min_size - H)
+    pw = max((-W) % multiple, min_size - W)
+    pad = (pw // 2, pw - pw // 2, ph // 2, ph - ph // 2)
+    if ph == 0 and pw == 0:
+        return images, pad
+    return F.pad(images, pad, mode="replicate"), pad
+
+
+def _to_unit_range(images: torch.Tensor, name: str) -> torch.Tensor:
+    if images.ndim == 3:
+        images = images[None]
+    if images.ndim != 4 or images.shape[1] != 3:
+        raise ValueError(f"{name}: expected RGB images (3, H, W) or (B, 3, H, W), got shape {tuple(images.shape)}")
+    if images.dtype == torch.uint8:
+        return images.float() / 127.5 - 1.0
+    if not images.is_floating_point():
+        raise ValueError(f"{name}: expected uint8 (0..255) or float (0..1) images, got {images.dtype}")
+    return images * 2.0 - 1.0
+
+
+def prepare_pair(
+    image1: torch.Tensor, image2: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, tuple[int, int, int, int]]:
+    """RAFT inputs from two batches of RGB images: uint8 0..255 or float 0..1, (B, 3, H, W) or
+    (3, H, W) -> [-1, 1], padded to multiples of 8; returns them and the padding."""
+    a, b = _to_unit_range(image1, "image1"), _to_unit_range(image2, "image2")
+    if a.shape != b.shape:
+        raise ValueError(f"image1 and image2: shapes differ, {tuple(a.shape)} vs {tuple(b.shape)}")
+    a, pad = pad_to_multiple(a)
+    b, _ = pad_to_multiple(b)
+    return a, b, pad
+
+
+def unpad(flow: torch.Tensor, pad: tuple[int, int, int, int]) -> torch.Tensor:
+    """Crop a padded (..., H, W) tensor back to the input size."""
+    left, right, top, bottom = pad
+    H, W = flow.shape[-2:]
+    return flow[..., top : H - bottom, left : W - right]
+
+
+def predict_flow(
+    model: RAFT, image1: torch.Tensor, image2: torch.Tensor, num_flow_updates: int = 32, all_updates: bool = False
+) -> torch.Tensor | list[torch.Tensor]:
+    """Forward flow image1 -> image2 with ``num_flow_updates`` RAFT iterations: (B, 2, H, W) in
+    pixels at the input size (or the list of every update's flow with ``all_updates``).
+    Runs on the model's device; gradients flow when enabled (used for fine-tuning)."""
+    device = next(model.parameters()).device
+    a, b, pad = prepare_pair(image1.to(device), image2.to(device))
+    flows = model(a, b, num_flow_updates=num_flow_updates)
+    if all_updates:
+        return [unpad(f, pad) for f in flows]
+    return unpad(flows[-1], pad)
