@@ -3,10 +3,13 @@
 Subcommands:
 
 - ``lit-boot synth --out DIR [--motion walk --frames 24 --height 256 --width 256 --seed 0 ...]``
-  writes a synthetic scene folder (with exact ground truth) and prints its summary.
+  writes a synthetic scene folder (with exact ground truth) and prints its summary. Every
+  option of :class:`lit_boot.synth.SynthConfig` is a flag.
+- ``lit-boot fit|validate|predict --config configs/flow_ttt.yaml --data.scene DIR`` runs a
+  LightningModule (FlowTTT ...) on one scene through Lightning's CLI; the run goes to
+  ``runs/<scene>/<model>`` unless ``--trainer.default_root_dir`` says otherwise.
 
-Every option of :class:`lit_boot.synth.SynthConfig` is a flag; ``--print_config`` shows them
-all as YAML and ``--config FILE`` reads them from one.
+``--print_config`` shows every option as YAML and ``--config FILE`` reads them from one.
 """
 
 from __future__ import annotations
@@ -58,7 +61,15 @@ class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
-COMMANDS = {"synth": synth}
+def lightning(argv: list[str]) -> int:
+    """``lit-boot fit|validate|predict``: Lightning's CLI over lit-boot's modules and data."""
+    from .lightning_cli import run_lightning_cli
+
+    run_lightning_cli(argv)
+    return 0
+
+
+COMMANDS = {"synth": synth, "fit": lightning, "validate": lightning, "predict": lightning}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -69,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"usage: lit-boot {{{names}}} [options]   (lit-boot COMMAND --help for the options)")
         return 0 if argv[:1] in ([], ["-h"], ["--help"]) else 2
     try:
-        return COMMANDS[argv[0]](argv[1:])
+        return COMMANDS[argv[0]](argv if COMMANDS[argv[0]] is lightning else argv[1:])
     except (CliError, ValueError, FileExistsError, FileNotFoundError) as err:
         print(f"lit-boot {argv[0]}: error: {err}", file=sys.stderr)
         return 2

@@ -1,16 +1,34 @@
-"""The flow half of the method: RAFT models and weights (more to come: the target sketch,
-FlowTTT). Never imports lit_boot.pose."""
+"""The flow half of the method (paper 3.1): RAFT models and weights, the pose-sketched target
+flow, and FlowTTT, which fine-tunes RAFT per scene on it. Never imports lit_boot.pose."""
 
+from .data import POSE_SOURCES, SceneFlowData, ScenePairs, SketchInputs, sketch_inputs
+from .module import FlowTTT
 from .raft import load_raft, pad_to_multiple, predict_flow, prepare_pair
+from .sketch import FOOTPRINTS, SketchConfig, SketchResult, footprint_offsets, sketch_flow, sketch_from_layout, target_flow
 from .weights import checkpoint_dirs, convert_original_state_dict, load_state_dict_file, resolve_weights
+from .writer import FlowWriter
 
 __all__ = [
+    "POSE_SOURCES",
+    "SceneFlowData",
+    "ScenePairs",
+    "SketchInputs",
+    "sketch_inputs",
+    "FlowTTT",
     "load_raft",
     "pad_to_multiple",
     "predict_flow",
     "prepare_pair",
+    "FOOTPRINTS",
+    "SketchConfig",
+    "SketchResult",
+    "footprint_offsets",
+    "sketch_flow",
+    "sketch_from_layout",
+    "target_flow",
     "checkpoint_dirs",
     "convert_original_state_dict",
     "load_state_dict_file",
     "resolve_weights",
+    "FlowWriter",
 ]

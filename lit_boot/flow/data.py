@@ -1,0 +1,168 @@
+"""One scene's consecutive frame pairs, with what the target sketch needs (FlowTTT's data).
+
+A :class:`SceneFlowData` reads a scene folder (or takes a :class:`~lit_boot.core.Scene`) and
+serves pairs (t, t+1): both frames, the pair index, and, when the scene has them, the ground
+truth used for evaluation only (flow, its valid mask, the person mask, GT 2D joints at t and
+t+1). :meth:`SceneFlowData.sketch_inputs` gives the joints the stick-man is drawn from.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import lightning as L
+import torch
+from torch.utils.data import DataLoader, Dataset
+
+from ..core import Scene, get_layout
+from ..data import load_scene
+
+__all__ = ["POSE_SOURCES", "SketchInputs", "ScenePairs", "SceneFlowData"]
+
+#: Where the stick-man comes from: projected 3D joints (3D mode), 2D keypoints (2D-only mode),
+#: or the ground-truth 2D joints (an oracle, for benchmarks).
+POSE_SOURCES = ("auto", "joints3d", "keypoints2d", "gt")
+
+
+@dataclass
+class SketchInputs:
+    """Joints per pair: joints_t, joints_t1 (P, K, 2) px; confidence_t/_t1 (P, K) or None;
+    depths (P, K) mm at t or None; the joints' layout name."""
+
+    layout: str
+    joints_t: torch.Tensor
+    joints_t1: torch.Tensor
+    confidence_t: torch.Tensor | None
+    confidence_t1: torch.Tensor | None
+    depths: torch.Tensor | None
+
+
+def sketch_inputs(scene: Scene, source: str = "auto", poses: torch.Tensor | None = None) -> SketchInputs:
+    """The joints to draw for every pair of ``scene``.
+
+    ``auto`` uses projected 3D joints when the scene has joints and cameras, else 2D keypoints.
+    ``poses`` replaces the scene's own pose source (e.g. refined joints (T, J, 3) in 3D mode,
+    refined keypoints (T, K, 2) in 2D mode).
+    """
+    if source not in POSE_SOURCES:
+        raise ValueError(f"pose_source: expected one of {POSE_SOURCES}, got {source!r}")
+    if source == "auto":
+        source = "joints3d" if scene.joints3d is not None and scene.cameras is not None else "keypoints2d"
+    conf = depths = None
+    if source == "joints3d":
+        if scene.joints3d is None or scene.cameras is None:
+            raise ValueError(f"pose_source 'joints3d': scene {scene.name!r} has no 3D joints with cameras")
+        joints3d = scene.joints3d if poses is None else poses
+        joints, depths, layout = scene.cameras.project(joints3d.float()), joints3d[..., 2].float(), scene.joints3d_layout
+    elif source == "keypoints2d":
+        if scene.keypoints2d is None:
+            raise ValueError(f"pose_source 'keypoints2d': scene {scene.name!r} has no 2D keypoints")
+        joints = scene.keypoints2d if poses is None else poses
+        conf, layout = scene.keypoints_conf, scene.keypoints_layout
+    else:
+        if scene.gt is None or scene.gt.joints2d is None:
+            raise ValueError(f"pose_source 'gt': scene {scene.name!r} has no ground-truth 2D joints")
+        joints, layout = scene.gt.joints2d, scene.gt.joints_layout
+        depths = scene.gt.joints3d[..., 2] if scene.gt.joints3d is not None else None
+    joints = joints.float()
+    return SketchInputs(
+        layout=get_layout(layout).name,
+        joints_t=joints[:-1],
+        joints_t1=joints[1:],
+        confidence_t=None if conf is None else conf[:-1].float(),
+        confidence_t1=None if conf is None else conf[1:].float(),
+        depths=None if depths is None else depths[:-1],
+    )
+
+
+class ScenePairs(Dataset):
+    """Pairs (t, t+1) of one scene as dicts: image1, image2 (3, H, W) uint8, index; and gt_flow
+    (2, H, W), gt_valid (H, W), person (H, W), gt_joints (J, 2) at t and gt_joints_next at t+1
+    when the scene has them."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+
+    def __len__(self) -> int:
+        return self.scene.num_frames - 1
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        s = self.scene
+        item = {"image1": s.frames[i], "image2": s.frames[i + 1], "index": torch.tensor(i)}
+        gt = s.gt
+        if gt is not None and gt.flow is not None:
+            item["gt_flow"] = gt.flow[i].float()
+            valid = gt.flow_valid[i] if gt.flow_valid is not None else torch.ones(s.height, s.width, dtype=torch.bool)
+            item["gt_valid"] = valid
+        if gt is not None and gt.person_mask is not None:
+            item["person"] = gt.person_mask[i]
+        if gt is not None and gt.joints2d is not None:
+            item["gt_joints"] = gt.joints2d[i].float()
+            item["gt_joints_next"] = gt.joints2d[i + 1].float()
+        return item
+
+
+class SceneFlowData(L.LightningDataModule):
+    """One scene's pairs for FlowTTT.
+
+    Args:
+        scene: a scene folder (see ``lit-boot synth``), or a Scene object from Python.
+        pose_source: where the stick-man comes from: auto, joints3d, keypoints2d, or gt (oracle).
+        batch_size: pairs per step (the paper: 1).
+        shuffle: visit the pairs in random order each epoch.
+        num_workers: DataLoader workers.
+    """
+
+    def __init__(
+        self,
+        scene: str | Path | Scene,
+        pose_source: str = "auto",
+        batch_size: int = 1,
+        shuffle: bool = True,
+        num_workers: int = 0,
+    ):
+        super().__init__()
+        if pose_source not in POSE_SOURCES:
+            raise ValueError(f"pose_source: expected one of {POSE_SOURCES}, got {pose_source!r}")
+        self.scene_arg = scene
+        self.pose_source = pose_source
+        self.batch_size = batch_size
+        self.shuffle = shuffle
+        self.num_workers = num_workers
+        self.scene: Scene | None = scene if isinstance(scene, Scene) else None
+        self.poses: torch.Tensor | None = None
+
+    @property
+    def name(self) -> str:
+        """The scene's name (its folder name before it is loaded)."""
+        return self.scene.name if self.scene is not None else Path(self.scene_arg).name
+
+    def setup(self, stage: str | None = None) -> None:
+        if self.scene is None:
+            self.scene = load_scene(self.scene_arg)
+        if self.scene.num_frames < 2:
+            raise ValueError(f"scene {self.scene.name!r}: needs at least 2 frames for flow, has 1")
+
+    def set_poses(self, poses: torch.Tensor | None) -> None:
+        """Draw the stick-man from these poses instead of the scene's (e.g. refined ones)."""
+        self.poses = poses
+
+    def sketch_inputs(self) -> SketchInputs:
+        self.setup()
+        return sketch_inputs(self.scene, self.pose_source, self.poses)
+
+    def _loader(self, shuffle: bool) -> DataLoader:
+        self.setup()
+        return DataLoader(
+            ScenePairs(self.scene), batch_size=self.batch_size, shuffle=shuffle, num_workers=self.num_workers
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader(self.shuffle)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader(False)
+
+    def predict_dataloader(self) -> DataLoader:
+        return self._loader(False)

@@ -1,0 +1,118 @@
+"""FlowTTT: targets, fine-tuning, options, logging, and the Lightning CLI (tiny scenes, CPU)."""
+
+from __future__ import annotations
+
+import lightning as L
+import pytest
+import torch
+
+from lit_boot.cli import main
+from lit_boot.data import load_scene, read_flo, save_scene
+from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig, predict_flow
+from lit_boot.synth import make_scene
+
+FAST = dict(train_updates=2, predict_updates=3, sketch=SketchConfig(size=3, guard=False))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_scene(motion="run", frames=3, height=64, width=96, seed=0)
+
+
+def trainer(tmp_path, epochs=1, **kw) -> L.Trainer:
+    return L.Trainer(max_epochs=epochs, default_root_dir=tmp_path, logger=False, enable_checkpointing=False,
+                     enable_progress_bar=False, enable_model_summary=False, num_sanity_val_steps=0, **kw)  # fmt: skip
+
+
+def test_targets_are_the_sketch_painted_over_rafts_own_flow(scene):
+    model = FlowTTT(weights=None, **FAST)
+    data = SceneFlowData(scene, pose_source="gt")
+    report = model.build_targets(data)
+    base = torch.cat([predict_flow(model.raft.eval(), scene.frames[t], scene.frames[t + 1], 2) for t in range(2)])
+    mask = model.sketch_masks
+    assert mask.any() and not mask.all()
+    torch.testing.assert_close(model.targets[~mask[:, None].expand_as(base)], base[~mask[:, None].expand_as(base)])
+    assert report["target/epe_sketch_painted"] < report["target/epe_base_painted"]  # GT joints beat a random net
+
+
+def test_fine_tuning_moves_the_flow_towards_the_target(scene, tmp_path):
+    torch.manual_seed(0)
+    model = FlowTTT(weights=None, lr=1e-3, **FAST)
+    data = SceneFlowData(scene, pose_source="gt", shuffle=False)
+    model.build_targets(data)
+    targets = model.targets.clone()
+
+    painted = model.sketch_masks[:, None].expand_as(targets)
+
+    def distance() -> float:
+        """Mean |flow - target| on the sketch's pixels."""
+        model.raft.eval()
+        with torch.no_grad():
+            flows = torch.cat([predict_flow(model.raft, scene.frames[t], scene.frames[t + 1], 2) for t in range(2)])
+        return (flows - targets).abs()[painted].mean().item()
+
+    before = distance()
+    trainer(tmp_path, epochs=3, limit_val_batches=0).fit(model, datamodule=data)
+    assert distance() < 0.9 * before
+
+
+def test_validation_logs_epe_and_drift(scene, tmp_path):
+    model = FlowTTT(weights=None, **FAST)
+    t = trainer(tmp_path)
+    t.fit(model, datamodule=SceneFlowData(scene, pose_source="gt"))
+    metrics = t.callback_metrics
+    for key in ("val/epe", "val/epe_person", "val/epe_joints", "val/drift_outside_person", "train/loss_epoch"):
+        assert key in metrics and torch.isfinite(metrics[key]), key
+    assert metrics["val/drift_outside_person"] > 0  # the network changed
+
+
+def test_update_block_only_and_frozen_batchnorm(scene, tmp_path):
+    model = FlowTTT(arch="raft_small", weights=None, train_parts="update_block", lr=1e-3, **FAST)
+    encoder = {k: v.clone() for k, v in model.raft.feature_encoder.state_dict().items()}
+    update = {k: v.clone() for k, v in model.raft.update_block.state_dict().items()}
+    trainer(tmp_path, limit_val_batches=0).fit(model, datamodule=SceneFlowData(scene, pose_source="gt"))
+    assert all(torch.equal(v, model.raft.feature_encoder.state_dict()[k]) for k, v in encoder.items())
+    assert any(not torch.equal(v, model.raft.update_block.state_dict()[k]) for k, v in update.items())
+    large = FlowTTT(arch="raft_large", weights=None, freeze_batchnorm=True, **FAST)
+    large.train()
+    bns = [m for m in large.raft.modules() if isinstance(m, torch.nn.BatchNorm2d)]
+    assert bns and not any(m.training for m in bns)
+
+
+def test_crop_training_holds_the_rest_of_the_frame(scene, tmp_path):
+    model = FlowTTT(weights=None, crop_margin=8, hold_weight=1.0, lr=1e-3, **FAST)
+    t = trainer(tmp_path)
+    t.fit(model, datamodule=SceneFlowData(scene, pose_source="gt"))
+    assert torch.isfinite(t.callback_metrics["train/loss_epoch"])
+    box = model._crop(model.sketch_masks[0])
+    y0, y1, x0, x1 = box
+    assert (y1 - y0) < scene.height or (x1 - x0) < scene.width  # a real crop
+    anchor = model._anchor(box, scene.height, scene.width)
+    assert (anchor[1] - anchor[0], anchor[3] - anchor[2]) == (y1 - y0, x1 - x0)
+
+
+def test_bad_options_are_refused():
+    with pytest.raises(ValueError, match="loss"):
+        FlowTTT(weights=None, loss="l2")
+    with pytest.raises(ValueError, match="train_parts"):
+        FlowTTT(weights=None, train_parts="encoder")
+    with pytest.raises(ValueError, match="pose_source"):
+        SceneFlowData("nowhere", pose_source="mocap")
+
+
+def test_cli_fit_then_predict_writes_checkpoint_and_flows(scene, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    save_scene(scene, tmp_path / "scene")
+    common = ["--config", str(pytest.importorskip("pathlib").Path(__file__).parents[1] / "configs" / "flow_ttt.yaml"),
+              "--data.scene", str(tmp_path / "scene"), "--model.weights", "null",
+              "--model.train_updates", "2", "--model.predict_updates", "2", "--model.sketch.size", "3",
+              "--trainer.enable_progress_bar", "false"]  # fmt: skip
+    assert main(["fit", *common, "--trainer.max_epochs", "1"]) == 0
+    run = tmp_path / "runs" / "scene" / "FlowTTT"
+    checkpoints = list(run.rglob("*.ckpt"))
+    assert len(checkpoints) == 1 and list(run.rglob("events.out.tfevents*"))
+    assert main(["predict", *common, "--ckpt_path", str(checkpoints[0])]) == 0
+    flows = sorted((run / "predictions").glob("flow_*.flo"))
+    assert len(flows) == scene.num_frames - 1 and len(list((run / "predictions").glob("flow_*.png"))) == len(flows)
+    assert read_flo(flows[0]).shape == (2, scene.height, scene.width)
+    assert load_scene(tmp_path / "scene").num_frames == scene.num_frames  # the input is untouched
