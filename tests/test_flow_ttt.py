@@ -81,7 +81,7 @@ def test_update_block_only_and_frozen_batchnorm(scene, tmp_path):
 
 def test_crop_training_holds_the_rest_of_the_frame(scene, tmp_path):
     model = FlowTTT(weights=None, crop_margin=8, hold_weight=1.0, lr=1e-3, **FAST)
-    t = trainer(tmp_path)
+    t = trainer(tmp_path, limit_val_batches=0)
     t.fit(model, datamodule=SceneFlowData(scene, pose_source="gt"))
     assert torch.isfinite(t.callback_metrics["train/loss_epoch"])
     box = model._crop(model.sketch_masks[0])
@@ -116,3 +116,20 @@ def test_cli_fit_then_predict_writes_checkpoint_and_flows(scene, tmp_path, monke
     assert len(flows) == scene.num_frames - 1 and len(list((run / "predictions").glob("flow_*.png"))) == len(flows)
     assert read_flo(flows[0]).shape == (2, scene.height, scene.width)
     assert load_scene(tmp_path / "scene").num_frames == scene.num_frames  # the input is untouched
+
+
+def test_flow_writer_npz_and_overwrite_protection(scene, tmp_path):
+    import numpy as np
+
+    from lit_boot.flow import FlowWriter
+
+    model = FlowTTT(weights=None, **FAST)
+    out = tmp_path / "pred"
+    writer = FlowWriter(output_dir=str(out), format="npz", png=False)
+    t = L.Trainer(logger=False, enable_progress_bar=False, callbacks=[writer])
+    t.predict(model, datamodule=SceneFlowData(scene, pose_source="gt"), return_predictions=False)
+    with np.load(out / "flows.npz") as npz:
+        assert npz["flow"].shape == (scene.num_frames - 1, 2, scene.height, scene.width)
+        assert npz["index"].tolist() == list(range(scene.num_frames - 1))
+    with pytest.raises(FileExistsError, match="pred"):
+        t.predict(model, datamodule=SceneFlowData(scene, pose_source="gt"), return_predictions=False)

@@ -83,6 +83,7 @@ class FlowTTT(L.LightningModule):
         self.targets: torch.Tensor | None = None  # (P, 2, H, W) on CPU
         self.sketch_masks: torch.Tensor | None = None  # (P, H, W)
         self.original: torch.Tensor | None = None  # (P, 2, H, W): the untuned network's prediction
+        self.target_report: dict[str, float] = {}
         self.val_epe = EndPointError()
         self.val_epe_person = EndPointError()
         self.val_epe_joints = PointEndPointError(mode="nearest")
