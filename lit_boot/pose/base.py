@@ -1,0 +1,221 @@
+"""What both pose refiners share: the Lightning plumbing of a per-video optimisation.
+
+A refiner holds the video's variables as parameters and its fixed inputs as buffers. It is
+built in ``setup`` from the datamodule's ``scene`` and ``flows`` (see :class:`PoseData`), or
+beforehand by :meth:`RefinerBase.prepare`. Every training step is one Adam step on the
+whole video. Loss terms are logged every ``trainer.log_every_n_steps`` steps (Lightning's
+``self.log`` costs milliseconds per call: logging every step would dominate the run), the
+evaluation against ground truth before the first step, every ``eval_every_n_steps`` steps
+and after the last. At the end, :attr:`RefinerBase.result` holds a :class:`PoseResult`, also
+saved (poses.npz, poses.json) into the run folder.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import lightning as L
+import torch
+from lightning.pytorch.callbacks import Callback
+
+from ..core import Scene
+from .result import PoseResult
+from .stopping import LossPlateauStopping
+
+__all__ = ["RefinerBase", "TorchThreads"]
+
+
+class TorchThreads(Callback):
+    """Fit with ``num_threads`` torch CPU threads; the previous number is restored at the end,
+    also when fitting fails."""
+
+    def __init__(self, num_threads: int):
+        super().__init__()
+        self.num_threads = num_threads
+        self._before: int | None = None
+
+    def on_fit_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        self._before = torch.get_num_threads()
+        torch.set_num_threads(self.num_threads)
+
+    def on_fit_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        self._restore()
+
+    def on_exception(self, trainer: L.Trainer, pl_module: L.LightningModule, exception: BaseException) -> None:
+        self._restore()
+
+    def _restore(self) -> None:
+        if self._before is not None:
+            torch.set_num_threads(self._before)
+            self._before = None
+
+
+class RefinerBase(L.LightningModule):
+    """Base of :class:`PoseRefiner` and :class:`KeypointRefiner`.
+
+    Subclasses implement ``build(scene, flows)`` (create parameters, buffers, and the
+    :class:`~lit_boot.pose.objective.Objective` ``self.objective``), ``residuals()`` (the
+    active terms' residuals in ``objective.names`` order), ``evaluate()`` (metrics against
+    ground truth, {} without it) and ``make_result()``.
+
+    Args:
+        lr: Adam learning rate.
+        eval_every_n_steps: evaluate against ground truth every this many steps (0: only before
+            and after); a multiple of the trainer's log_every_n_steps reaches the loggers.
+        save: write the refined poses into ``output_dir`` at the end of fitting.
+        output_dir: where to save (default: the trainer's log_dir, i.e. the run folder).
+        num_threads: torch CPU threads during fitting (restored afterwards); None leaves them.
+            The problem is small: one thread avoids thread-synchronisation costs that, on a
+            busy CPU, made a step of this size several times slower.
+    """
+
+    mode = "3d"
+
+    def __init__(
+        self,
+        lr: float,
+        eval_every_n_steps: int = 100,
+        save: bool = True,
+        output_dir: str | None = None,
+        num_threads: int | None = 1,
+    ):
+        super().__init__()
+        if lr <= 0:
+            raise ValueError(f"lr: expected a positive learning rate, got {lr}")
+        self.scene_name = "scene"
+        self.prepared = False
+        self.result: PoseResult | None = None
+        self.metrics_before: dict[str, float] = {}
+        self._started = 0.0
+
+    def __setattr__(self, name: str, value: object) -> None:
+        # Lightning sets _current_fx_name around every hook call (~40 times a step); a plain
+        # string attribute needs none of nn.Module.__setattr__'s checks, which cost ~10 us each
+        # on a busy CPU: several percent of a whole refinement step.
+        if name == "_current_fx_name":
+            object.__setattr__(self, name, value)
+        else:
+            super().__setattr__(name, value)
+
+    # --- to be implemented by subclasses -----------------------------------------------------
+    def build(self, scene: Scene, flows: torch.Tensor | None) -> None:
+        raise NotImplementedError
+
+    def residuals(self) -> list[torch.Tensor]:
+        raise NotImplementedError
+
+    def evaluate(self) -> dict[str, float]:
+        raise NotImplementedError
+
+    def make_result(self) -> PoseResult:
+        raise NotImplementedError
+
+    # --- building ------------------------------------------------------------------------------
+    def prepare(self, scene: Scene, flows: torch.Tensor | None) -> None:
+        """Initialise the variables from ``scene`` and hold ``flows`` (T-1, 2, H, W) px or None."""
+        if flows is not None and tuple(flows.shape) != (scene.num_frames - 1, 2, scene.height, scene.width):
+            raise ValueError(
+                f"flows: expected shape {(scene.num_frames - 1, 2, scene.height, scene.width)} "
+                f"for scene {scene.name!r}, got {tuple(flows.shape)}"
+            )
+        self.scene_name = scene.name
+        self.build(scene, None if flows is None else flows.float())
+        self.result = None
+        self.prepared = True
+
+    def setup(self, stage: str) -> None:
+        dm = self.trainer.datamodule if self._trainer is not None else None
+        if dm is not None and getattr(dm, "scene", None) is not None:
+            self.prepare(dm.scene, getattr(dm, "flows", None))
+        elif not self.prepared:
+            raise RuntimeError(
+                f"{type(self).__name__}: give the data with a PoseData datamodule "
+                "(trainer.fit(model, datamodule=PoseData(scene, flows))) or call prepare(scene, flows) first"
+            )
+
+    # --- optimisation -------------------------------------------------------------------------
+    def configure_optimizers(self) -> torch.optim.Optimizer:
+        """Adam; the fused implementation where the device has one (fewer small kernels)."""
+        try:
+            return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, fused=True)
+        except (RuntimeError, ValueError):
+            return torch.optim.Adam(self.parameters(), lr=self.hparams.lr)
+
+    def total_loss(self, with_terms: bool = False) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """The loss (a zero with a gradient if every term is off) and, if asked, each weighted
+        term by name (without gradient)."""
+        residuals = self.residuals()
+        if len(self.objective):
+            total = self.objective(residuals)
+        else:
+            total = sum(p.sum() * 0.0 for p in self.parameters())
+        return total, self.objective.split(residuals) if with_terms else {}
+
+    def loss_terms(self) -> dict[str, torch.Tensor]:
+        """Each weighted term's current value by name (without gradient)."""
+        return self.total_loss(with_terms=True)[1]
+
+    def training_step(self, batch: int, batch_idx: int) -> torch.Tensor:
+        every = self.trainer.log_every_n_steps if self._trainer is not None else 1
+        step = self.global_step
+        log_now = bool(every) and (step + 1) % every == 0
+        loss, terms = self.total_loss(with_terms=log_now)
+        if log_now:
+            logged = {f"loss/{k}": v for k, v in terms.items()}
+            logged["loss/total"] = loss.detach()
+            self.log_dict(logged, on_step=True, on_epoch=False, batch_size=1)
+        n = self.hparams.eval_every_n_steps
+        if n and (step + 1) % n == 0:
+            metrics = self.evaluate()
+            if metrics:
+                self.log_dict(metrics, on_step=True, on_epoch=False, batch_size=1)
+        return loss
+
+    # --- hooks -----------------------------------------------------------------------------------
+    def configure_callbacks(self) -> list[Callback]:
+        n = self.hparams.num_threads
+        return [TorchThreads(n)] if n is not None else []
+
+    def on_fit_start(self) -> None:
+        self._started = time.perf_counter()
+
+    def on_train_start(self) -> None:
+        self.metrics_before = self.evaluate()
+        if self.metrics_before:
+            for logger in self.loggers:
+                logger.log_metrics(self.metrics_before, step=0)
+
+    def on_train_epoch_end(self) -> None:
+        metrics = self.evaluate()
+        if metrics:
+            self.log_dict(metrics, on_step=False, on_epoch=True, batch_size=1)
+
+    def on_train_end(self) -> None:
+        self.result = self.make_result()
+        self.result.seconds = time.perf_counter() - self._started
+        if self.hparams.save:
+            self.result.save(self.output_folder())
+
+    # --- results ---------------------------------------------------------------------------------
+    def output_folder(self) -> Path:
+        """Where the poses are saved: ``output_dir``, else the trainer's log_dir."""
+        if self.hparams.output_dir:
+            return Path(self.hparams.output_dir)
+        trainer = self._trainer
+        return Path(trainer.log_dir or trainer.default_root_dir) if trainer is not None else Path(".")
+
+    def stopped_early(self) -> bool:
+        """Whether a :class:`LossPlateauStopping` callback stopped the run."""
+        trainer = self._trainer
+        if trainer is None:
+            return False
+        return any(isinstance(c, LossPlateauStopping) and c.stopped_step is not None for c in trainer.callbacks)
+
+    @torch.no_grad()
+    def final_loss(self) -> dict[str, float]:
+        """The weighted loss terms at the current variables, as floats."""
+        loss, terms = self.total_loss(with_terms=True)
+        out = {k: float(v) for k, v in terms.items()}
+        out["total"] = float(loss)
+        return out

@@ -1,0 +1,213 @@
+"""PoseRefiner: per-video optimisation of 3D joints and cameras against the flow (paper 3.2).
+
+Variables: joints X (T, J, 3) in metres (METRO's unit: Adam's lr is a distance per step in
+metres, as for the authors) and per-frame camera variables C (T, 3) (see
+:class:`CameraModel`), both initialised from the scene's estimates. Loss (each term SmoothL1,
+beta 1, summed over elements, averaged over frames, times its lambda)::
+
+    L = opt * L_opt(P(X, C); F)          projected motion vs the flow, px
+      + joints3d * |X - X0|              deviation from the initial joints, m
+      + keypoints2d * c |P(X, C) - x|    agreement with the detector, px
+      + pos * |X_t - X_t-1|              joint smoothness, m
+      + cam * |C_t - C_t-1|              camera smoothness
+      + bone * |len_t - len_t-1|         bone-length constancy (the layout's length_bones), m
+      + proj_smooth * |P_t - P_t-1|      2D smoothness (the authors' code, lambda 0), px
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ..core import Scene, get_layout
+from ..metrics import AccelerationError, MeanPerJointPositionError
+from .base import RefinerBase
+from .camera import CameraModel
+from .keypoints import CONFIDENCE_MODES, keypoints_for_layout
+from .losses import bone_lengths, bone_matrix, flow_residual, temporal_residual
+from .objective import Objective, Term
+from .result import PoseResult
+
+__all__ = ["PoseLossWeights", "PoseRefiner", "inside_image"]
+
+
+@dataclass
+class PoseLossWeights:
+    """The lambdas of the 3D refiner (defaults: the paper's, for METRO). 0 switches a term off."""
+
+    opt: float = 0.01
+    joints3d: float = 400.0
+    keypoints2d: float = 0.01
+    pos: float = 300.0
+    cam: float = 0.1
+    bone: float = 1.0e4
+    proj_smooth: float = 0.0
+
+
+def inside_image(points: torch.Tensor, height: int, width: int) -> torch.Tensor:
+    """(..., J) float: 1 where the point (..., J, 2) px lies within the image, else 0."""
+    upper = points.new_tensor([width - 1, height - 1])
+    return ((points >= 0) & (points <= upper)).all(dim=-1).float()
+
+
+class PoseRefiner(RefinerBase):
+    """Refine a video's 3D joints and cameras so that their projected motion follows the flow.
+
+    Args:
+        lr: Adam learning rate on joints (metres) and camera variables (the paper: 1e-3).
+        weights: the lambdas (:class:`PoseLossWeights`; the paper's by default).
+        keypoint_joints: joints that get the 2D term (names in the joints' layout; default the
+            authors' 10: shoulders, elbows, wrists, knees, ankles).
+        confidence: binary (1 where confidence > threshold: the authors), real (the confidence
+            itself), or none (every keypoint weighs 1).
+        confidence_threshold: detections at or below it weigh 0 (default 0: undetected).
+        flow_inside_only: the flow term only for joints whose frame t-1 projection lies in
+            the image (the authors sample the border flow there).
+        pixel_scale: 2D residuals (flow, detections, 2D smoothness) are multiplied by this
+            before SmoothL1, i.e. measured in pixels of an image this many times larger. 1 (the
+            paper): pixels of this image. The paper's lambdas were tuned on Human3.6M frames
+            (1000x1000, a person some 400-500 px tall); on small frames the 2D terms are
+            correspondingly weaker (see BENCHMARKS.md).
+        eval_every_n_steps, save, output_dir, num_threads: see :class:`RefinerBase`.
+    """
+
+    mode = "3d"
+
+    def __init__(
+        self,
+        lr: float = 1e-3,
+        weights: PoseLossWeights | None = None,
+        keypoint_joints: Sequence[str] | None = None,
+        confidence: str = "binary",
+        confidence_threshold: float = 0.0,
+        flow_inside_only: bool = True,
+        pixel_scale: float = 1.0,
+        eval_every_n_steps: int = 100,
+        save: bool = True,
+        output_dir: str | None = None,
+        num_threads: int | None = 1,
+    ):
+        super().__init__(lr, eval_every_n_steps, save, output_dir, num_threads)
+        if confidence not in CONFIDENCE_MODES:
+            raise ValueError(f"confidence: expected one of {CONFIDENCE_MODES}, got {confidence!r}")
+        if pixel_scale <= 0:
+            raise ValueError(f"pixel_scale: expected a positive factor, got {pixel_scale}")
+        self.weights = PoseLossWeights(**weights) if isinstance(weights, dict) else weights or PoseLossWeights()
+        self.save_hyperparameters(ignore=["weights"])
+        self.hparams["weights"] = asdict(self.weights)
+        self.layout_name = "lsp14"
+        self.image_size = (1, 1)
+
+    # --- building ------------------------------------------------------------------------------
+    def build(self, scene: Scene, flows: torch.Tensor | None) -> None:
+        if scene.joints3d is None or scene.cameras is None:
+            raise ValueError(f"PoseRefiner: scene {scene.name!r} has no 3D joints with cameras (use KeypointRefiner)")
+        w = self.weights
+        if flows is None and w.opt != 0:
+            raise ValueError("PoseRefiner: no flows given; pass flows (a .flo folder, flows.npz or 'gt') or set weights.opt 0")
+        layout = get_layout(scene.joints3d_layout)
+        self.layout_name = layout.name
+        self.register_buffer("bones", bone_matrix(layout.length_bones, layout.num_joints), persistent=False)
+        self.image_size = (scene.height, scene.width)
+        self.camera = CameraModel(scene.cameras)
+        joints_m = scene.joints3d.detach().float() / 1000.0
+        self.joints = nn.Parameter(joints_m.clone())
+        self.camera_vars = nn.Parameter(self.camera.initial())
+        self.register_buffer("initial_joints", joints_m, persistent=False)
+        self.register_buffer("flows", flows, persistent=False)
+        keypoints = weight = None
+        if scene.keypoints2d is not None and w.keypoints2d != 0:
+            keypoints, weight = keypoints_for_layout(
+                scene, layout.name, self.hparams.keypoint_joints, self.hparams.confidence,
+                self.hparams.confidence_threshold,
+            )  # fmt: skip
+        self.register_buffer("keypoints", keypoints, persistent=False)
+        self.register_buffer("keypoint_weight", weight, persistent=False)
+        T, J = joints_m.shape[:2]
+        self.objective = Objective([
+            Term("opt", (T - 1, J, 2), w.opt),
+            Term("3d", (T, J, 3), w.joints3d),
+            Term("2d", (T, J, 2), w.keypoints2d if keypoints is not None else 0.0, weight),
+            Term("pos", (T - 1, J, 3), w.pos),
+            Term("cam", (T - 1, 3), w.cam),
+            Term("bone", (T - 1, len(layout.length_bones)), w.bone),
+            Term("proj_smooth", (T - 1, J, 2), w.proj_smooth),
+        ])  # fmt: skip
+        gt = scene.gt
+        has_gt3d = gt is not None and gt.joints3d is not None and gt.joints_layout == layout.name
+        has_gt2d = gt is not None and gt.joints2d is not None and gt.joints_layout == layout.name
+        self.register_buffer("gt_joints3d", gt.joints3d.float() if has_gt3d else None, persistent=False)
+        self.register_buffer("gt_joints2d", gt.joints2d.float() if has_gt2d else None, persistent=False)
+        root = layout.root or (0,)
+        self.metric_mpjpe = MeanPerJointPositionError("root", root=root)
+        self.metric_pa_mpjpe = MeanPerJointPositionError("procrustes", root=root)
+        self.metric_accel = AccelerationError(root=root)
+        self.metric_proj = MeanPerJointPositionError("none")
+
+    # --- the loss -----------------------------------------------------------------------------
+    def projected(self) -> torch.Tensor:
+        """The current joints projected by the current cameras, (T, J, 2) px."""
+        return self.camera.project(self.joints, self.camera_vars)
+
+    def residuals(self) -> list[torch.Tensor]:
+        """The active terms' residuals, in ``objective.names`` order (see the module doc)."""
+        X, k, names = self.joints, self.hparams.pixel_scale, self.objective.names
+        P = self.projected()
+        out: dict[str, torch.Tensor] = {}
+        if "opt" in names:
+            r = flow_residual(P, self.flows, k)
+            if self.hparams.flow_inside_only:
+                r = r * inside_image(P[:-1].detach(), *self.image_size)[..., None]
+            out["opt"] = r
+        if "3d" in names:
+            out["3d"] = X - self.initial_joints
+        if "2d" in names:
+            out["2d"] = P - self.keypoints if k == 1.0 else (P - self.keypoints) * k
+        if "pos" in names:
+            out["pos"] = temporal_residual(X)
+        if "cam" in names:
+            out["cam"] = temporal_residual(self.camera_vars)
+        if "bone" in names:
+            out["bone"] = temporal_residual(bone_lengths(X, self.bones))
+        if "proj_smooth" in names:
+            out["proj_smooth"] = temporal_residual(P) * k
+        return [out[name] for name in names]
+
+    # --- evaluation and results -----------------------------------------------------------------
+    def joints_mm(self) -> torch.Tensor:
+        """The current joints (T, J, 3) in millimetres."""
+        return self.joints.detach() * 1000.0
+
+    @torch.no_grad()
+    def evaluate(self) -> dict[str, float]:
+        """MPJPE, PA-MPJPE (mm), acceleration error (mm/frame^2) against the GT 3D joints, and
+        the projection's 2D error (px) against the GT 2D joints; {} without ground truth."""
+        out: dict[str, float] = {}
+        if self.gt_joints3d is not None:
+            pred = self.joints_mm()
+            metrics = [("eval/mpjpe_mm", self.metric_mpjpe), ("eval/pa_mpjpe_mm", self.metric_pa_mpjpe)]
+            if pred.shape[0] >= 3:
+                metrics.append(("eval/accel_mm_per_frame2", self.metric_accel))
+            for name, metric in metrics:
+                metric.reset()
+                metric.update(pred, self.gt_joints3d)
+                out[name] = float(metric.compute())
+        if self.gt_joints2d is not None:
+            # 2D distances through the 3D metric: z = 0 on both sides.
+            self.metric_proj.reset()
+            self.metric_proj.update(F.pad(self.projected().detach(), (0, 1)), F.pad(self.gt_joints2d, (0, 1)))
+            out["eval/proj2d_px"] = float(self.metric_proj.compute())
+        return out
+
+    def make_result(self) -> PoseResult:
+        return PoseResult(
+            mode="3d", layout=self.layout_name, scene=self.scene_name,
+            joints3d=self.joints_mm().float().cpu(), cameras=self.camera.to_cameras(self.camera_vars),
+            projected2d=self.projected().detach().float().cpu(), steps=int(self.global_step),
+            stopped_early=self.stopped_early(), loss=self.final_loss(), metrics_before=dict(self.metrics_before),
+            metrics_after=self.evaluate(), settings=dict(self.hparams),
+        )  # fmt: skip
