@@ -7,7 +7,11 @@ The public API:
 - scene folders: :func:`load_scene`, :func:`save_scene`; Middlebury flow: :func:`read_flo`,
   :func:`write_flo`;
 - synthetic scenes with exact ground truth: :func:`make_scene`, :class:`SynthConfig`;
-- metrics: ``lit_boot.metrics`` (EPE, Fl-all, MPJPE, PA-MPJPE, acceleration error).
+- metrics: ``lit_boot.metrics`` (EPE, Fl-all, MPJPE, PA-MPJPE, acceleration error);
+- the pose stage (``lit_boot.pose``): :class:`PoseRefiner` (3D joints and cameras) with
+  :class:`PoseLossWeights`, :class:`KeypointRefiner` (2D-only) with
+  :class:`KeypointLossWeights`, their data :class:`PoseData`, the one-call
+  :func:`refine_poses`, and its :class:`PoseResult` (read back by :func:`load_pose_result`).
 """
 
 from .core import (
@@ -24,6 +28,16 @@ from .core import (
     map_joints,
 )
 from .data import load_scene, read_flo, save_scene, write_flo
+from .pose import (
+    KeypointLossWeights,
+    KeypointRefiner,
+    PoseData,
+    PoseLossWeights,
+    PoseRefiner,
+    PoseResult,
+    load_pose_result,
+    refine_poses,
+)
 from .synth import SynthConfig, make_scene
 
 __version__ = "0.1.0"
@@ -46,5 +60,13 @@ __all__ = [
     "write_flo",
     "SynthConfig",
     "make_scene",
+    "PoseRefiner",
+    "PoseLossWeights",
+    "KeypointRefiner",
+    "KeypointLossWeights",
+    "PoseData",
+    "PoseResult",
+    "load_pose_result",
+    "refine_poses",
     "__version__",
 ]

@@ -6,6 +6,7 @@ optical flow, as Lightning modules.
 - :class:`KeypointRefiner`: the 2D-only mode, keypoints optimised directly
   (:class:`KeypointLossWeights`);
 - :class:`PoseData`: a scene and its flows (``.flo`` folder, ``flows.npz``, or ``"gt"``);
+  validating a refiner with it (``lit-boot validate``) evaluates the current poses;
 - :class:`LossPlateauStopping`: the authors' early stop;
 - :func:`refine_poses`: all of it in one call; :class:`PoseResult`: what comes out (saved as
   poses.npz + poses.json, read back by :func:`load_pose_result`).

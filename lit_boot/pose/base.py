@@ -7,19 +7,26 @@ whole video. Loss terms are logged every ``trainer.log_every_n_steps`` steps (Li
 ``self.log`` costs milliseconds per call: logging every step would dominate the run), the
 evaluation against ground truth before the first step, every ``eval_every_n_steps`` steps
 and after the last. At the end, :attr:`RefinerBase.result` holds a :class:`PoseResult`, also
-saved (poses.npz, poses.json) into the run folder.
+saved (poses.npz, poses.json) into the run folder. Validation (``trainer.validate``,
+``lit-boot validate``) evaluates the current poses without changing them: the initial estimates
+of a fresh refiner, the refined poses after fitting.
 """
 
 from __future__ import annotations
 
+import inspect
 import time
+from dataclasses import asdict, fields
 from pathlib import Path
+from typing import Any
 
 import lightning as L
 import torch
 from lightning.pytorch.callbacks import Callback
+from lightning.pytorch.trainer.states import TrainerFn
 
 from ..core import Scene
+from .keypoints import CONFIDENCE_MODES
 from .result import PoseResult
 from .stopping import LossPlateauStopping
 
@@ -54,6 +61,7 @@ class TorchThreads(Callback):
 class RefinerBase(L.LightningModule):
     """Base of :class:`PoseRefiner` and :class:`KeypointRefiner`.
 
+    A subclass's ``__init__`` calls ``super().__init__(...)``, then :meth:`save_settings`.
     Subclasses implement ``build(scene, flows)`` (create parameters, buffers, and the
     :class:`~lit_boot.pose.objective.Objective` ``self.objective``), ``residuals()`` (the
     active terms' residuals in ``objective.names`` order), ``evaluate()`` (metrics against
@@ -88,6 +96,34 @@ class RefinerBase(L.LightningModule):
         self.result: PoseResult | None = None
         self.metrics_before: dict[str, float] = {}
         self._started = 0.0
+        self._scene_key: tuple | None = None
+
+    def save_settings(self, weights: Any, weights_type: type, confidence: str) -> None:
+        """The constructor tail both refiners share; a subclass's ``__init__`` calls it.
+
+        Checks ``confidence``, makes ``self.weights`` a ``weights_type`` (the lambdas dataclass)
+        from an instance, a dict of some of its fields, or None (the defaults), and saves every
+        argument of the calling ``__init__`` as ``hparams``, the lambdas as a plain dict.
+        """
+        if confidence not in CONFIDENCE_MODES:
+            raise ValueError(f"confidence: expected one of {CONFIDENCE_MODES}, got {confidence!r}")
+        if isinstance(weights, dict):
+            known = [f.name for f in fields(weights_type)]
+            unknown = sorted(set(weights) - set(known))
+            if unknown:
+                raise ValueError(f"weights: unknown lambda {unknown[0]!r}; expected some of {known}")
+            weights = weights_type(**weights)
+        elif weights is None:
+            weights = weights_type()
+        elif not isinstance(weights, weights_type):
+            raise TypeError(f"weights: expected a {weights_type.__name__}, a dict or None, got {type(weights).__name__}")
+        self.weights = weights
+        # Saved from a helper: Lightning must read the arguments of the caller's frame (the
+        # subclass __init__), not this one's.
+        self.save_hyperparameters(ignore=["weights"], frame=inspect.currentframe().f_back)
+        self.hparams["weights"] = asdict(weights)
+        self._hparams_initial["weights"] = asdict(weights)  # what loggers record as hparams
+        self.image_size = (1, 1)
 
     def __setattr__(self, name: str, value: object) -> None:
         # Lightning sets _current_fx_name around every hook call (~40 times a step); a plain
@@ -123,11 +159,17 @@ class RefinerBase(L.LightningModule):
         self.build(scene, None if flows is None else flows.float())
         self.result = None
         self.prepared = True
+        self._scene_key = (scene.name, scene.num_frames, scene.height, scene.width)
 
     def setup(self, stage: str) -> None:
+        """Build from the datamodule's scene: always before fitting; before validating only if
+        the refiner does not hold that scene's poses yet (so the refined poses are evaluated)."""
         dm = self.trainer.datamodule if self._trainer is not None else None
-        if dm is not None and getattr(dm, "scene", None) is not None:
-            self.prepare(dm.scene, getattr(dm, "flows", None))
+        scene = getattr(dm, "scene", None) if dm is not None else None
+        if scene is not None:
+            key = (scene.name, scene.num_frames, scene.height, scene.width)
+            if stage == TrainerFn.FITTING or not self.prepared or key != self._scene_key:
+                self.prepare(scene, getattr(dm, "flows", None))
         elif not self.prepared:
             raise RuntimeError(
                 f"{type(self).__name__}: give the data with a PoseData datamodule "
@@ -171,6 +213,15 @@ class RefinerBase(L.LightningModule):
             if metrics:
                 self.log_dict(metrics, on_step=True, on_epoch=False, batch_size=1)
         return loss
+
+    def validation_step(self, batch: int, batch_idx: int) -> None:
+        """Log the current poses' evaluation (eval/*, with ground truth) and loss terms
+        (loss/*). While fitting it logs nothing: the training epoch's end logs the same."""
+        if self.trainer.state.fn == TrainerFn.FITTING:
+            return
+        logged = {f"loss/{k}": v for k, v in self.final_loss().items()}
+        logged.update(self.evaluate())
+        self.log_dict(logged, on_step=False, on_epoch=True, batch_size=1)
 
     # --- hooks -----------------------------------------------------------------------------------
     def configure_callbacks(self) -> list[Callback]:

@@ -3,7 +3,8 @@
 The whole video is one optimisation problem, so the data lives on the refiner (read in its
 ``setup`` from ``trainer.datamodule.scene`` and ``.flows``) and the training dataloader only
 counts steps: ``steps`` items of one epoch, each a step index. One epoch of N steps costs far
-less in Lightning than N epochs of one step each.
+less in Lightning than N epochs of one step each. The validation dataloader has one item: one
+evaluation of the current poses.
 """
 
 from __future__ import annotations
@@ -45,8 +46,8 @@ class PoseData(L.LightningDataModule):
         scene: a scene folder (``lit-boot synth`` writes one) or a Scene.
         flows: a folder of ``flow_000000.flo`` ... (one per pair), a ``flows.npz`` (key
             ``flow`` (T-1, 2, H, W), optional ``index``), ``gt`` for the scene's ground-truth
-            flow (an oracle), a (T-1, 2, H, W) tensor, or None (no flow: the refiner's flow
-            weight must then be 0).
+            flow (an oracle), a (T-1, 2, H, W) tensor (or NumPy array), or None (no flow: the
+            refiner's flow weight must then be 0).
         steps: optimisation steps, as items of one epoch; None: the trainer's ``max_steps``
             when set, else 1500.
     """
@@ -93,3 +94,6 @@ class PoseData(L.LightningDataModule):
 
     def train_dataloader(self) -> DataLoader:
         return DataLoader(StepIndices(self.num_steps()), batch_size=None, shuffle=False)
+
+    def val_dataloader(self) -> DataLoader:
+        return DataLoader(StepIndices(1), batch_size=None, shuffle=False)

@@ -3,7 +3,7 @@
 Sources: a folder of Middlebury files ``flow_000000.flo`` ... (one per pair t -> t+1, as
 :class:`lit_boot.flow.FlowWriter` writes them; other files are ignored), one ``.npz`` file with
 key ``flow`` (P, 2, H, W) and optionally ``index`` (P,) (the pair of each flow), ``"gt"`` for the
-scene's ground-truth flow (an oracle), or a tensor.
+scene's ground-truth flow (an oracle), or a tensor (or NumPy array) of flows.
 """
 
 from __future__ import annotations
@@ -94,16 +94,25 @@ def _read_npz(path: Path, pairs: int, height: int, width: int) -> torch.Tensor:
     return _check_shape(flow, str(path), pairs, height, width)
 
 
-def load_flows(source: str | os.PathLike | torch.Tensor, scene: Scene) -> torch.Tensor:
-    """The forward flows (T-1, 2, H, W) px for ``scene`` from ``source`` (see the module doc).
+def load_flows(source: str | os.PathLike | torch.Tensor | np.ndarray, scene: Scene) -> torch.Tensor:
+    """The forward flows (T-1, 2, H, W) px for ``scene`` from ``source`` (see the module doc;
+    an array is taken like a tensor).
 
-    Raises FileNotFoundError for a missing path and :class:`FlowSourceError` (a ValueError),
-    naming the path, when the count or size does not match the scene.
+    Raises FileNotFoundError for a missing path, TypeError for another kind of source, and
+    :class:`FlowSourceError` (a ValueError), naming the path, when the count or size does not
+    match the scene.
     """
     T, H, W = scene.num_frames, scene.height, scene.width
     pairs = T - 1
+    if isinstance(source, np.ndarray):
+        source = torch.from_numpy(source)
     if isinstance(source, torch.Tensor):
         return _check_shape(source.detach().cpu(), "flows", pairs, H, W)
+    if not isinstance(source, (str, os.PathLike)):
+        raise TypeError(
+            f"flows: expected a folder of flow_*.flo files, a .npz file, 'gt' or a ({pairs}, 2, {H}, {W}) "
+            f"tensor, got {type(source).__name__}"
+        )
     if str(source) == "gt":
         if scene.gt is None or scene.gt.flow is None:
             raise FlowSourceError(f"flows 'gt': scene {scene.name!r} has no ground-truth flow")

@@ -17,7 +17,7 @@ beta 1, summed over elements, averaged over frames, times its lambda)::
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
@@ -27,7 +27,7 @@ from ..core import Scene, get_layout
 from ..metrics import AccelerationError, MeanPerJointPositionError
 from .base import RefinerBase
 from .camera import CameraModel
-from .keypoints import CONFIDENCE_MODES, keypoints_for_layout
+from .keypoints import keypoints_for_layout
 from .losses import bone_lengths, bone_matrix, flow_residual, temporal_residual
 from .objective import Objective, Term
 from .result import PoseResult
@@ -69,9 +69,12 @@ class PoseRefiner(RefinerBase):
             the image (the authors sample the border flow there).
         pixel_scale: 2D residuals (flow, detections, 2D smoothness) are multiplied by this
             before SmoothL1, i.e. measured in pixels of an image this many times larger. 1 (the
-            paper): pixels of this image. The paper's lambdas were tuned on Human3.6M frames
-            (1000x1000, a person some 400-500 px tall); on small frames the 2D terms are
-            correspondingly weaker (see BENCHMARKS.md).
+            paper): pixels of this image. The paper's 2D lambdas were tuned on Human3.6M frames
+            (1000x1000, a person some 400-500 px tall), so the 2D terms pull correspondingly
+            less on a smaller person. Raise it when the person is much smaller than ~450 px
+            tall, to about 450 / (their height in px): e.g. 6 for a 75 px person (on the
+            synthetic suite that made L_2D and L_opt with exact flow help a little more; with
+            RAFT's flow no better: see BENCHMARKS.md). Leave it at 1 otherwise.
         eval_every_n_steps, save, output_dir, num_threads: see :class:`RefinerBase`.
     """
 
@@ -92,15 +95,10 @@ class PoseRefiner(RefinerBase):
         num_threads: int | None = 1,
     ):
         super().__init__(lr, eval_every_n_steps, save, output_dir, num_threads)
-        if confidence not in CONFIDENCE_MODES:
-            raise ValueError(f"confidence: expected one of {CONFIDENCE_MODES}, got {confidence!r}")
         if pixel_scale <= 0:
             raise ValueError(f"pixel_scale: expected a positive factor, got {pixel_scale}")
-        self.weights = PoseLossWeights(**weights) if isinstance(weights, dict) else weights or PoseLossWeights()
-        self.save_hyperparameters(ignore=["weights"])
-        self.hparams["weights"] = asdict(self.weights)
+        self.save_settings(weights, PoseLossWeights, confidence)
         self.layout_name = "lsp14"
-        self.image_size = (1, 1)
 
     # --- building ------------------------------------------------------------------------------
     def build(self, scene: Scene, flows: torch.Tensor | None) -> None:

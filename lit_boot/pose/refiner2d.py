@@ -12,7 +12,7 @@ The authors: Adam lr 0.1, opt 300, init 400, smooth 0, 1500 steps.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
@@ -21,7 +21,7 @@ from torch import nn
 from ..core import Scene
 from ..metrics import MeanPerJointPositionError
 from .base import RefinerBase
-from .keypoints import CONFIDENCE_MODES, confidence_weights
+from .keypoints import confidence_weights
 from .losses import flow_residual, temporal_residual
 from .objective import Objective, Term
 from .refiner import inside_image
@@ -67,13 +67,8 @@ class KeypointRefiner(RefinerBase):
         num_threads: int | None = 1,
     ):
         super().__init__(lr, eval_every_n_steps, save, output_dir, num_threads)
-        if confidence not in CONFIDENCE_MODES:
-            raise ValueError(f"confidence: expected one of {CONFIDENCE_MODES}, got {confidence!r}")
-        self.weights = KeypointLossWeights(**weights) if isinstance(weights, dict) else weights or KeypointLossWeights()
-        self.save_hyperparameters(ignore=["weights"])
-        self.hparams["weights"] = asdict(self.weights)
+        self.save_settings(weights, KeypointLossWeights, confidence)
         self.layout_name = "coco17"
-        self.image_size = (1, 1)
 
     def build(self, scene: Scene, flows: torch.Tensor | None) -> None:
         if scene.keypoints2d is None:
