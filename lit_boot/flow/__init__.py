@@ -6,7 +6,7 @@ from .module import FlowTTT
 from .raft import load_raft, pad_to_multiple, predict_flow, prepare_pair
 from .sketch import FOOTPRINTS, SketchConfig, SketchResult, footprint_offsets, sketch_flow, sketch_from_layout, target_flow
 from .weights import checkpoint_dirs, convert_original_state_dict, load_state_dict_file, resolve_weights
-from .writer import FlowWriter
+from .writer import FlowWriter, write_flows, write_flows_npz
 
 __all__ = [
     "POSE_SOURCES",
@@ -31,4 +31,6 @@ __all__ = [
     "load_state_dict_file",
     "resolve_weights",
     "FlowWriter",
+    "write_flows",
+    "write_flows_npz",
 ]

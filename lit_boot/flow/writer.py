@@ -20,9 +20,32 @@ from lightning.pytorch.callbacks import BasePredictionWriter
 from ..data import flow_image, write_flo, write_png
 from ..data.atomic import atomic_write_bytes
 
-__all__ = ["FlowWriter"]
+__all__ = ["FlowWriter", "write_flows", "write_flows_npz"]
 
 FORMATS = ("flo", "npz")
+
+
+def write_flows(folder: str | Path, flows: torch.Tensor, indices: list[int] | None = None, flo: bool = True,
+                png: bool = True) -> Path:
+    """Per pair t of ``indices`` (default 0..P-1) write ``flow_<t>.flo`` and/or the colour image
+    ``flow_<t>.png`` of flows (P, 2, H, W) px into ``folder``, atomically; returns the folder."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    indices = list(range(len(flows))) if indices is None else list(indices)
+    for i, flow in zip(indices, flows.detach().float().cpu()):
+        if flo:
+            write_flo(folder / f"flow_{i:06d}.flo", flow)
+        if png:
+            write_png(folder / f"flow_{i:06d}.png", flow_image(flow))
+    return folder
+
+
+def write_flows_npz(path: str | Path, flows: torch.Tensor, indices: list[int] | None = None) -> Path:
+    """One npz (keys ``flow`` (P, 2, H, W) float32, ``index`` (P,)), written atomically."""
+    indices = list(range(len(flows))) if indices is None else list(indices)
+    buffer = io.BytesIO()
+    np.savez(buffer, flow=flows.detach().float().cpu().numpy(), index=np.array(indices))
+    return atomic_write_bytes(path, buffer.getvalue())
 
 
 class FlowWriter(BasePredictionWriter):
@@ -58,18 +81,12 @@ class FlowWriter(BasePredictionWriter):
     def write_on_batch_end(
         self, trainer: L.Trainer, pl_module: L.LightningModule, prediction: Any, batch_indices, batch, batch_idx: int, dataloader_idx: int = 0
     ) -> None:
-        out = self.folder(trainer)
-        for i, flow in zip(prediction["index"].tolist(), prediction["flow"].float().cpu()):
-            if self.format == "flo":
-                write_flo(out / f"flow_{i:06d}.flo", flow)
-            else:
-                self._npz[i] = flow
-            if self.png:
-                write_png(out / f"flow_{i:06d}.png", flow_image(flow))
+        indices, flows = prediction["index"].tolist(), prediction["flow"].float().cpu()
+        if self.format == "npz":
+            self._npz.update(zip(indices, flows))
+        write_flows(self.folder(trainer), flows, indices, flo=self.format == "flo", png=self.png)
 
     def on_predict_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         if self.format == "npz" and self._npz:
             order = sorted(self._npz)
-            buffer = io.BytesIO()
-            np.savez(buffer, flow=torch.stack([self._npz[i] for i in order]).numpy(), index=np.array(order))
-            atomic_write_bytes(self.folder(trainer) / "flows.npz", buffer.getvalue())
+            write_flows_npz(self.folder(trainer) / "flows.npz", torch.stack([self._npz[i] for i in order]), order)

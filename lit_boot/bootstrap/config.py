@@ -1,0 +1,167 @@
+"""The orchestrator's settings, and the presets that fill in the method's choices.
+
+Presets (``BootstrapConfig.preset``):
+
+- ``paper``: what the authors' code does (REFERENCE section 3): the stick-man painted with
+  30x30 px squares at 22 points per bone (6x6 squares in the 2D-only Sintel script), binary
+  confidences, 20 training updates, SmoothL1 on the final prediction, mixed precision on CUDA
+  (fp16), BatchNorm not frozen; the refiners' paper lambdas.
+- ``default``: the paper's text instead of its code where they differ (a cross of radius 15
+  px), with the footprint scaled to the person's size in the video (15 px at a person
+  450 px tall, as on Human3.6M; never below 2 px), since a fixed 30 px square paints most
+  of a small person and the background around it. Everything else as ``paper``.
+
+A user's ``flow`` / ``pose`` dicts (FlowTTT's / the refiner's constructor arguments) override the
+preset, key by key (``sketch`` too: ``{"sketch": {"size": 5}}`` keeps the preset's footprint).
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+__all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "BootstrapConfig"]
+
+MODES = ("3d", "2d")
+DRIFT_GUARDS = ("record", "stop", "rollback")
+
+#: Per preset and mode: FlowTTT arguments, refiner arguments, options of the orchestrator.
+PRESETS: dict[str, dict[str, dict[str, Any]]] = {
+    "paper": {
+        "flow_3d": {"sketch": {"footprint": "square", "size": 30, "points_per_bone": 22}, "loss": "final",
+                    "train_updates": 20, "freeze_batchnorm": False, "lr": 1e-5},
+        "flow_2d": {"sketch": {"footprint": "square", "size": 6, "points_per_bone": 22}, "loss": "final",
+                    "train_updates": 20, "freeze_batchnorm": False, "lr": 1e-5},
+        "pose_3d": {"confidence": "binary"},
+        "pose_2d": {"confidence": "binary"},
+        "options": {"scale_footprint": False, "cuda_precision": "16-mixed"},
+    },
+    "default": {
+        "flow_3d": {"sketch": {"footprint": "cross", "size": 15}, "loss": "final", "train_updates": 20, "lr": 1e-5},
+        "flow_2d": {"sketch": {"footprint": "cross", "size": 15}, "loss": "final", "train_updates": 20, "lr": 1e-5},
+        "pose_3d": {"confidence": "binary"},
+        "pose_2d": {"confidence": "binary"},
+        "options": {"scale_footprint": True, "cuda_precision": "16-mixed"},
+    },
+}  # fmt: skip
+
+#: The person height (px) at which the paper's footprint sizes hold (Human3.6M, 1000x1000 frames).
+REFERENCE_PERSON_PX = 450.0
+
+
+def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """``base`` updated by ``override``, nested dicts merged key by key (copies; inputs kept)."""
+    out = copy.deepcopy(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+@dataclass
+class BootstrapConfig:
+    """How a bootstrap run goes.
+
+    Args:
+        mode: 3d (joints and cameras; the stick-man from projected joints) or 2d (2D keypoints
+            only; paper 3.3).
+        preset: paper or default (see the module doc).
+        cycles: pose cycles; the run is flow, (pose, flow) x cycles: the paper's 1 gives
+            flow -> pose -> flow.
+        flow: FlowTTT arguments over the preset's (arch, weights, lr, sketch, crop_margin, ...).
+        pose: PoseRefiner / KeypointRefiner arguments over the preset's (lr, weights, ...).
+        flow_epochs: epochs per flow stage; None: 8 in 3D mode, 50 in 2D mode (the paper).
+        pose_steps: Adam steps per pose stage (the paper: 1500).
+        early_stop: the authors' early stop of the pose stage (loss unchanged to 4 decimals for
+            10 steps).
+        restart_flow: each flow stage starts from the pretrained weights (else, as the
+            authors, it continues from the previous flow stage's).
+        flow_ensemble: extra FlowTTT argument dicts (e.g. ``[{"arch": "raft_large", "weights":
+            "C_T_V1"}]``): each network is fine-tuned alike and the flows are averaged (Table 2).
+        pose_ensemble: extra refined-pose folders (poses.npz + poses.json, e.g. another
+            estimator's joints in the same layout) averaged with the scene's estimates first.
+        accelerator: for the flow stages (auto: CUDA when available).
+        pose_accelerator: for the pose stages (a few thousand numbers: the CPU is faster).
+        precision: Lightning precision of the flow stages; None: the preset's on CUDA
+            (mixed), 32-true on CPU.
+        drift_guard: after each stage the flow-pose agreement is compared with before it:
+            record only, stop the run when it worsens by more than ``drift_tolerance`` px, or
+            roll that stage back and stop.
+        drift_tolerance: px.
+        flow_format: flo (one Middlebury file per pair) or npz for the run's final flows.
+        video: write overlay.mp4.
+        progress_bar: Lightning's progress bars.
+        seed: seed_everything before each stage (the same run gives the same result).
+    """
+
+    mode: str = "3d"
+    preset: str = "default"
+    cycles: int = 1
+    flow: dict[str, Any] = field(default_factory=dict)
+    pose: dict[str, Any] = field(default_factory=dict)
+    flow_epochs: int | None = None
+    pose_steps: int = 1500
+    early_stop: bool = True
+    restart_flow: bool = False
+    flow_ensemble: list[dict[str, Any]] = field(default_factory=list)
+    pose_ensemble: list[str] = field(default_factory=list)
+    accelerator: str = "auto"
+    pose_accelerator: str = "cpu"
+    precision: str | None = None
+    drift_guard: str = "record"
+    drift_tolerance: float = 0.0
+    flow_format: str = "flo"
+    video: bool = True
+    progress_bar: bool = True
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        checks = [("mode", MODES), ("preset", tuple(PRESETS)), ("drift_guard", DRIFT_GUARDS), ("flow_format", ("flo", "npz"))]
+        for name, allowed in checks:
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name}: expected one of {allowed}, got {getattr(self, name)!r}")
+        if self.cycles < 0:
+            raise ValueError(f"cycles: expected >= 0, got {self.cycles}")
+        if self.flow_epochs is not None and self.flow_epochs < 1:
+            raise ValueError(f"flow_epochs: expected >= 1 or None, got {self.flow_epochs}")
+        if self.pose_steps < 1:
+            raise ValueError(f"pose_steps: expected >= 1, got {self.pose_steps}")
+        if self.drift_tolerance < 0:
+            raise ValueError(f"drift_tolerance: expected >= 0 px, got {self.drift_tolerance}")
+
+    @property
+    def epochs(self) -> int:
+        """Epochs per flow stage."""
+        return self.flow_epochs if self.flow_epochs is not None else (8 if self.mode == "3d" else 50)
+
+    def stages(self) -> list[str]:
+        """Stage names in order: flow_1, pose_1, flow_2, ..."""
+        names = ["flow_1"]
+        for c in range(1, self.cycles + 1):
+            names += [f"pose_{c}", f"flow_{c + 1}"]
+        return names
+
+    def option(self, name: str) -> Any:
+        return PRESETS[self.preset]["options"][name]
+
+    def flow_kwargs(self, member: int = 0, person_px: float | None = None) -> dict[str, Any]:
+        """FlowTTT arguments for ensemble member ``member`` (0: ``flow``), the preset's
+        footprint scaled to a person ``person_px`` tall when the preset says so and the user
+        gave no size."""
+        user = self.flow if member == 0 else merge(self.flow, self.flow_ensemble[member - 1])
+        kwargs = merge(PRESETS[self.preset][f"flow_{self.mode}"], user)
+        user_size = "size" in user.get("sketch", {})
+        if self.option("scale_footprint") and not user_size and person_px:
+            size = kwargs["sketch"]["size"] * person_px / REFERENCE_PERSON_PX
+            kwargs["sketch"]["size"] = max(2, int(round(size)))
+        return kwargs
+
+    def pose_kwargs(self) -> dict[str, Any]:
+        """Refiner arguments: the preset's, then the user's."""
+        return merge(PRESETS[self.preset][f"pose_{self.mode}"], self.pose)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)

@@ -1,0 +1,34 @@
+"""What a bootstrap run shows while it runs: one header line per stage, and pictures per stage
+in TensorBoard (the flow of the middle pair in colour, the skeleton on its first frame)."""
+
+from __future__ import annotations
+
+import torch
+from lightning.pytorch.loggers import TensorBoardLogger
+
+from ..core import Scene
+from ..data import draw_skeleton, flow_image
+from .evaluate import pose_points
+
+__all__ = ["stage_header", "log_stage_images"]
+
+
+def stage_header(index: int, total: int, name: str, what: str) -> str:
+    """``[lit-boot] stage 1/3 flow_1: FlowTTT ...`` (stage 0 is the initial prediction)."""
+    return f"[lit-boot] stage {index}/{total} {name}: {what}"
+
+
+@torch.no_grad()
+def log_stage_images(loggers: list, step: int, stage: str, scene: Scene, flows: torch.Tensor, mode: str) -> None:
+    """Add the middle pair's flow colour image and the current skeleton on its first frame
+    (3, H, W uint8 each) to every TensorBoard logger, at ``step``, tagged by ``stage``."""
+    tensorboards = [lg for lg in loggers if isinstance(lg, TensorBoardLogger)]
+    if not tensorboards:
+        return
+    t = (scene.num_frames - 1) // 2
+    points, keep = pose_points(scene, mode)
+    layout = scene.joints3d_layout if mode == "3d" else scene.keypoints_layout
+    skeleton = draw_skeleton(scene.frames[t], points[t], layout, confidence=keep[t].float(), threshold=0.5)
+    for logger in tensorboards:
+        logger.experiment.add_image(f"flow/{stage}", flow_image(flows[t].float()), step)
+        logger.experiment.add_image(f"skeleton/{stage}", skeleton, step)

@@ -1,0 +1,70 @@
+"""A finished run's outputs: final flows, poses and weights, summary.json, the metrics plot and
+the overlay video (see :mod:`lit_boot.bootstrap.runner` for the folder layout)."""
+
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING, Any
+
+import torch
+
+from ..data.atomic import atomic_write_bytes
+from ..flow import write_flows, write_flows_npz
+from .config import BootstrapConfig
+from .evaluate import pose_points
+from .report import overlay_frames, plot_history, write_video
+
+if TYPE_CHECKING:
+    from .runner import BootstrapResult
+
+__all__ = ["write_outputs", "speed_summary"]
+
+
+def speed_summary(result: BootstrapResult) -> dict[str, float]:
+    """Wall time of the stages, RAFT inference alone (the initial stage), their ratio, and
+    seconds per frame."""
+    total = sum(result.seconds.values())
+    raft = result.seconds.get("initial", float("nan"))
+    frames = result.scene.num_frames
+    return {"total_s": total, "raft_inference_s": raft, "ratio_to_raft": total / raft if raft else float("nan"),
+            "s_per_frame": total / frames, "frames": frames}  # fmt: skip
+
+
+def write_outputs(
+    result: BootstrapResult,
+    settings: dict[str, Any],
+    guard_events: list[dict[str, Any]],
+    accelerator: str,
+    precision: str,
+    config: BootstrapConfig,
+) -> None:
+    """Write the run folder's final files (each atomically)."""
+    out = result.run_dir
+    if config.flow_format == "npz":
+        write_flows_npz(out / "flows" / "flows.npz", result.flows)
+    write_flows(out / "flows", result.flows, flo=config.flow_format == "flo", png=True)
+    if result.poses is not None:
+        result.poses.save(out)
+    flow_stages = [r["stage"] for r in result.history if r["kind"] == "flow" and not r.get("rolled_back")]
+    if flow_stages:
+        for weights in sorted((out / "stages" / flow_stages[-1]).glob("raft_*.pt")):
+            member = weights.stem.split("_")[1]
+            name = "raft_finetuned.pt" if member == "0" else f"raft_finetuned_m{member}.pt"
+            atomic_write_bytes(out / name, weights.read_bytes())
+    device = torch.cuda.get_device_name() if accelerator == "cuda" else "cpu"
+    summary = {
+        "format": "lit-boot-bootstrap", "version": 1, **settings, "device": device, "precision": precision,
+        "stages": result.history, "before_after": {k: list(v) for k, v in result.before_after().items()},
+        "speed": speed_summary(result), "drift_guard_events": guard_events,
+    }  # fmt: skip
+    atomic_write_bytes(out / "summary.json", (json.dumps(summary, indent=2, default=str) + "\n").encode())
+    plot_history(result.history, out / "metrics.png")
+    if config.video:
+        before, keep0 = pose_points(result.initial_scene, config.mode)
+        after, keep1 = pose_points(result.scene, config.mode)
+        layout = result.scene.joints3d_layout if config.mode == "3d" else result.scene.keypoints_layout
+        nan = float("nan")
+        before = torch.where(keep0[..., None], before, nan)
+        after = torch.where(keep1[..., None], after, nan)
+        mosaic = overlay_frames(result.scene.frames, result.initial_flows, result.flows, before, after, layout)
+        write_video(mosaic, out / "overlay.mp4", fps=result.scene.fps)

@@ -1,0 +1,95 @@
+"""The method's stages as the orchestrator runs them, each with its own Lightning Trainer.
+
+- :func:`predict_flows`: RAFT's flow for every pair of a scene (the initial flow, and each flow
+  stage's result);
+- :func:`fine_tune_flow`: FlowTTT on the stick-man drawn from the scene's current poses;
+- :func:`refine_poses_stage`: PoseRefiner (3D) or KeypointRefiner (2D) against a flow.
+
+The flow and pose halves meet here and in the runner only.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import lightning as L
+import torch
+
+from ..core import Scene
+from ..flow import FlowTTT, SceneFlowData, SketchConfig
+from ..pose import KeypointRefiner, PoseData, PoseRefiner, PoseResult
+from ..pose.api import make_trainer
+
+__all__ = ["make_flow_model", "predict_flows", "fine_tune_flow", "refine_poses_stage", "pose_source"]
+
+
+def pose_source(mode: str) -> str:
+    """Where the stick-man comes from in ``mode``: projected 3D joints or 2D keypoints."""
+    return "joints3d" if mode == "3d" else "keypoints2d"
+
+
+def make_flow_model(kwargs: dict[str, Any]) -> FlowTTT:
+    """A FlowTTT from constructor arguments (``sketch`` may be a dict)."""
+    kwargs = dict(kwargs)
+    if isinstance(kwargs.get("sketch"), dict):
+        kwargs["sketch"] = SketchConfig(**kwargs["sketch"])
+    return FlowTTT(**kwargs)
+
+
+def _flow_trainer(max_epochs: int, accelerator: str, precision: str, loggers: list, progress_bar: bool) -> L.Trainer:
+    return L.Trainer(
+        max_epochs=max_epochs, accelerator=accelerator, devices=1, precision=precision, logger=loggers or False,
+        enable_checkpointing=False, enable_model_summary=False, num_sanity_val_steps=0, limit_val_batches=0,
+        enable_progress_bar=progress_bar, log_every_n_steps=1,
+    )  # fmt: skip
+
+
+def predict_flows(
+    model: FlowTTT, scene: Scene, accelerator: str, precision: str, progress_bar: bool = False
+) -> torch.Tensor:
+    """``model``'s flow (T-1, 2, H, W) px for every pair, with its ``predict_updates``."""
+    trainer = _flow_trainer(1, accelerator, precision, [], progress_bar)
+    out = trainer.predict(model, datamodule=SceneFlowData(scene, shuffle=False))
+    order = torch.cat([o["index"] for o in out]).argsort()
+    return torch.cat([o["flow"].float().cpu() for o in out])[order]
+
+
+def fine_tune_flow(
+    model: FlowTTT,
+    scene: Scene,
+    mode: str,
+    epochs: int,
+    accelerator: str,
+    precision: str,
+    loggers: list,
+    progress_bar: bool = True,
+) -> dict[str, float]:
+    """Fine-tune ``model`` in place on the stick-man from ``scene``'s current poses; returns
+    FlowTTT's target report (bones rejected by the guard, painted fraction, ...)."""
+    model.targets = model.sketch_masks = model.original = None  # rebuilt from these poses
+    data = SceneFlowData(scene, pose_source=pose_source(mode))
+    trainer = _flow_trainer(epochs, accelerator, precision, loggers, progress_bar)
+    trainer.fit(model, datamodule=data)
+    return dict(model.target_report)
+
+
+def refine_poses_stage(
+    scene: Scene,
+    flows: torch.Tensor,
+    mode: str,
+    kwargs: dict[str, Any],
+    steps: int,
+    early_stop: bool,
+    accelerator: str,
+    loggers: list,
+    progress_bar: bool = True,
+) -> PoseResult:
+    """Refine ``scene``'s poses against ``flows`` (T-1, 2, H, W) px; returns the result."""
+    kwargs = {**kwargs, "save": False}
+    refiner = PoseRefiner(**kwargs) if mode == "3d" else KeypointRefiner(**kwargs)
+    trainer = make_trainer(
+        steps, early_stop, logger=loggers or False, accelerator=accelerator, enable_progress_bar=progress_bar,
+        log_every_n_steps=min(50, steps),
+    )  # fmt: skip
+    trainer.fit(refiner, datamodule=PoseData(scene, flows, steps=steps))
+    return refiner.result

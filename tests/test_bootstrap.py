@@ -1,0 +1,172 @@
+"""The orchestrator on tiny synthetic scenes (CPU): stages, outputs, resume, guard, ensembles."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import cv2
+import pytest
+import torch
+
+import lit_boot
+from lit_boot.bootstrap import Bootstrap, BootstrapConfig, agreement, bootstrap, pose_points
+from lit_boot.bootstrap import runner as runner_module
+from lit_boot.bootstrap.ensemble import average_poses
+from lit_boot.pose import PoseResult
+
+FAST = dict(flow_epochs=1, pose_steps=15, progress_bar=False)
+
+
+def fast_flow(shared):
+    return {"weights": str(shared / "checkpoints/raft-small.pth"), "train_updates": 2, "predict_updates": 3}
+
+
+@pytest.fixture(scope="module")
+def tiny_scene():
+    return lit_boot.make_scene(motion="run", frames=4, height=64, width=96, seed=0)
+
+
+def folder_digest(path):
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(path.rglob("*")) if p.is_file()}
+
+
+# --- settings ---------------------------------------------------------------------------------------
+
+
+def test_config_stages_and_presets():
+    assert BootstrapConfig().stages() == ["flow_1", "pose_1", "flow_2"]
+    assert BootstrapConfig(cycles=2).stages() == ["flow_1", "pose_1", "flow_2", "pose_2", "flow_3"]
+    assert BootstrapConfig(mode="2d").epochs == 50 and BootstrapConfig().epochs == 8
+    paper = BootstrapConfig(preset="paper").flow_kwargs(person_px=90)
+    assert paper["sketch"] == {"footprint": "square", "size": 30, "points_per_bone": 22}
+    # default: the paper's cross of radius 15 at 450 px people, scaled to the person
+    assert BootstrapConfig().flow_kwargs(person_px=90)["sketch"]["size"] == 3
+    assert BootstrapConfig().flow_kwargs(person_px=900)["sketch"]["size"] == 30
+    assert BootstrapConfig().flow_kwargs(person_px=10)["sketch"]["size"] == 2
+    # a user's size wins, other sketch keys kept from the preset
+    user = BootstrapConfig(flow={"sketch": {"size": 7}, "lr": 1e-4}).flow_kwargs(person_px=90)
+    assert user["sketch"] == {"footprint": "cross", "size": 7} and user["lr"] == 1e-4
+    member = BootstrapConfig(flow={"lr": 1e-4}, flow_ensemble=[{"arch": "raft_large"}]).flow_kwargs(1)
+    assert member["arch"] == "raft_large" and member["lr"] == 1e-4
+
+
+@pytest.mark.parametrize(
+    "bad, word", [({"mode": "4d"}, "mode"), ({"preset": "x"}, "preset"), ({"cycles": -1}, "cycles"),
+                  ({"drift_guard": "x"}, "drift_guard"), ({"pose_steps": 0}, "pose_steps")],  # fmt: skip
+)
+def test_config_rejects_bad_values(bad, word):
+    with pytest.raises(ValueError, match=word):
+        BootstrapConfig(**bad)
+
+
+# --- measurements ------------------------------------------------------------------------------------
+
+
+def test_agreement_is_zero_for_poses_moving_with_the_flow_and_measures_the_offset():
+    flows = torch.zeros(2, 2, 32, 48)
+    flows[:, 0], flows[:, 1] = 2.0, -1.0
+    points = torch.tensor([[[10.0, 10.0], [20.0, 15.0]]]).repeat(3, 1, 1)
+    points[1] += torch.tensor([2.0, -1.0])
+    points[2] += torch.tensor([4.0, -2.0])
+    keep = torch.ones(3, 2, dtype=torch.bool)
+    assert agreement(flows, points, keep) == pytest.approx(0.0, abs=1e-5)
+    shifted = points.clone()
+    shifted[1:] += torch.tensor([3.0, 4.0])  # frame 1 and 2 off by 5 px: pair 0 disagrees by 5, pair 1 by 0
+    assert agreement(flows, shifted, keep) == pytest.approx(2.5, abs=1e-4)
+    keep[0] = False  # pair 0 no longer counts
+    assert agreement(flows, shifted, keep) == pytest.approx(0.0, abs=1e-5)
+
+
+def test_pose_points_follow_the_mode(tiny_scene):
+    p3, k3 = pose_points(tiny_scene, "3d")
+    assert p3.shape == (4, 14, 2) and k3.all()
+    p2, k2 = pose_points(tiny_scene, "2d")
+    assert p2.shape == (4, 17, 2) and torch.equal(k2, tiny_scene.keypoints_conf > 0)
+
+
+def test_average_poses_means_the_estimates(tiny_scene, tmp_path):
+    other = tiny_scene.joints3d + 10.0
+    PoseResult(mode="3d", layout="lsp14", joints3d=other, cameras=tiny_scene.cameras).save(tmp_path / "a")
+    mean = average_poses(tiny_scene, [str(tmp_path / "a")], "3d")
+    assert torch.allclose(mean.joints3d, tiny_scene.joints3d + 5.0)
+    PoseResult(mode="3d", layout="lsp14", joints3d=other[:2], cameras=tiny_scene.cameras).save(tmp_path / "b")
+    with pytest.raises(ValueError, match="joints3d shape"):
+        average_poses(tiny_scene, [str(tmp_path / "b")], "3d")
+
+
+# --- runs ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.shared
+def test_run_produces_every_output_and_improves_the_pose(shared, tiny_scene, tmp_path):
+    scene_dir = lit_boot.save_scene(tiny_scene, tmp_path / "scene")
+    before = folder_digest(scene_dir)
+    result = Bootstrap(scene_dir, tmp_path / "run", flow=fast_flow(shared), **FAST).run()
+    assert folder_digest(scene_dir) == before  # the input is never written
+    run = tmp_path / "run"
+    for name in ("config.json", "summary.json", "metrics.png", "overlay.mp4", "poses.npz", "poses.json",
+                 "raft_finetuned.pt", "flows/flow_000000.flo", "flows/flow_000002.png"):  # fmt: skip
+        assert (run / name).is_file(), name
+    assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1", "flow_2"]
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["speed"]["frames"] == 4 and summary["speed"]["ratio_to_raft"] > 1
+    assert {"epe", "epe_person", "epe_joints", "mpjpe_mm", "agreement_px"} <= set(summary["before_after"])
+    mpjpe0, mpjpe1 = summary["before_after"]["mpjpe_mm"]
+    assert mpjpe1 < mpjpe0  # jittered estimates get smoother and closer to GT
+    assert result.flows.shape == (3, 2, 64, 96) and not torch.equal(result.flows, result.initial_flows)
+    assert torch.allclose(result.scene.joints3d, result.poses.joints3d)
+    video = cv2.VideoCapture(str(run / "overlay.mp4"))
+    assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
+    assert (run / "logs/tensorboard/summary").is_dir() and (run / "logs/csv/flow_1/metrics.csv").is_file()
+    # the final weights load into a fresh network and give the final flow
+    state = torch.load(run / "raft_finetuned.pt", weights_only=True)
+    assert set(state) == set(lit_boot.flow.load_raft("raft_small", None).state_dict())
+
+
+@pytest.mark.shared
+def test_interrupted_run_resumes_after_the_last_finished_stage(shared, tiny_scene, tmp_path, monkeypatch):
+    def broken(*args, **kwargs):
+        raise RuntimeError("interrupted")
+
+    monkeypatch.setattr(runner_module, "refine_poses_stage", broken)
+    with pytest.raises(RuntimeError, match="interrupted"):
+        bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, **FAST)
+    assert (tmp_path / "run/stages/flow_1/stage.json").is_file()
+    assert not (tmp_path / "run/stages/pose_1").exists()
+    monkeypatch.undo()
+    calls = []
+    original = runner_module.fine_tune_flow
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(runner_module, "fine_tune_flow", counting)
+    result = bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, **FAST)
+    assert len(calls) == 1  # flow_2 only: flow_1 was loaded
+    assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1", "flow_2"]
+    with pytest.raises(ValueError, match="cycles"):
+        bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, cycles=2, **FAST)
+
+
+@pytest.mark.shared
+def test_drift_guard_rolls_back_a_stage_that_worsens_the_agreement(shared, tiny_scene, tmp_path, monkeypatch):
+    values = iter([1.0, 0.5, 2.0, 0.1])  # initial, flow_1 (better), pose_1 (worse), flow_2 (never run)
+    monkeypatch.setattr(runner_module, "agreement", lambda *a, **k: next(values))
+    result = bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, drift_guard="rollback", **FAST)
+    assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1"]
+    assert result.history[-1]["rolled_back"] and result.poses is None
+    assert torch.equal(result.scene.joints3d, tiny_scene.joints3d)  # the pose stage's output discarded
+    summary = json.loads((tmp_path / "run/summary.json").read_text())
+    assert summary["drift_guard_events"][0]["stage"] == "pose_1"
+
+
+@pytest.mark.shared
+def test_2d_mode_with_a_flow_ensemble(shared, tiny_scene, tmp_path):
+    result = bootstrap(tiny_scene, tmp_path / "run", mode="2d", flow=fast_flow(shared), video=False,
+                       flow_ensemble=[{"lr": 1e-4}], **FAST)  # fmt: skip
+    assert result.poses.mode == "2d" and result.poses.keypoints2d.shape == (4, 17, 2)
+    assert (tmp_path / "run/raft_finetuned.pt").is_file() and (tmp_path / "run/raft_finetuned_m1.pt").is_file()
+    record = result.history[1]
+    assert record["kind"] == "flow" and "kp2d_px" in result.history[2]

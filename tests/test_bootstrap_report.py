@@ -1,0 +1,247 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from lit_boot.bootstrap import report
+from lit_boot.bootstrap.report import overlay_frames, plot_history, write_video
+from lit_boot.data import flow_image, read_png
+from lit_boot.synth import make_scene
+
+HISTORY = [
+    {"stage": "initial", "kind": None, "cycle": None, "epe": 0.25, "epe_person": 5.0, "mpjpe_mm": 60.0,
+     "agreement_px": 4.0},
+    {"stage": "flow_0", "kind": "flow", "cycle": 0, "epe": 0.18, "epe_person": 4.3, "epe_joints": 4.2,
+     "agreement_px": 3.1},
+    {"stage": "pose_0", "kind": "pose", "cycle": 0, "mpjpe_mm": 53.6, "pa_mpjpe_mm": 43.5,
+     "accel_mm_per_frame2": 30.7, "agreement_px": 2.0},
+    {"stage": "flow_1", "kind": "flow", "cycle": 1, "epe": 0.17, "epe_person": None, "agreement_px": 1.8},
+]  # fmt: skip
+
+
+def uniform_flow(n: int, u: float, v: float, h: int, w: int) -> torch.Tensor:
+    return torch.tensor([u, v]).view(1, 2, 1, 1).expand(n, 2, h, w).clone()
+
+
+# --- plot_history ----------------------------------------------------------------------------
+
+
+def assert_plot(path: Path) -> torch.Tensor:
+    image = read_png(path)
+    assert image.shape[1] > 100 and image.shape[2] > 100
+    grey = image.float().mean(0)
+    assert (grey < 128).float().mean() > 0.002  # text, axes and lines, not a blank page
+    assert image.float().std() > 5
+    return image
+
+
+def test_plot_history_writes_png(tmp_path: Path) -> None:
+    path = plot_history(HISTORY, tmp_path / "metrics.png")
+    assert path == tmp_path / "metrics.png"
+    image = assert_plot(path)
+    # 8 metrics -> a 3 x 3 grid (wider and taller than a single subplot)
+    single = assert_plot(plot_history([{"stage": "initial", "agreement_px": 3.0}], tmp_path / "one.png"))
+    assert image.shape[1] > 2 * single.shape[1] and image.shape[2] > 2 * single.shape[2]
+    # markers in matplotlib's default blue (#1f77b4) appear
+    blue = (image[0] < 80) & (image[1] > 90) & (image[1] < 150) & (image[2] > 150)
+    assert blue.sum() > 50
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["metrics.png", "one.png"]  # no temporary left
+
+
+def test_plot_history_without_gt(tmp_path: Path) -> None:
+    history = [
+        {"stage": "initial", "kind": None, "cycle": None, "agreement_px": 3.5, "epe": None},
+        {"stage": "flow_0", "kind": "flow", "cycle": 0, "agreement_px": 2.9},
+        {"stage": "pose_0", "kind": "pose", "cycle": 0, "agreement_px": 2.0},
+    ]
+    alone = assert_plot(plot_history(history, tmp_path / "m.png"))
+    history[1]["epochs"], history[2]["note"] = 8, "text"  # an int and a string: not metrics
+    assert torch.equal(assert_plot(plot_history(history, tmp_path / "m.png")), alone)
+    assert report._metric_value(8) is None and report._metric_value(float("nan")) is None
+    assert report._metric_value(np.float32(2.5)) == 2.5
+    assert_plot(plot_history(history, tmp_path / "m.png"))
+
+
+def test_plot_history_units() -> None:
+    assert report._unit("agreement_px") == "px"
+    assert report._unit("mpjpe_mm") == "mm"
+    assert report._unit("epe_person") == "px" and report._unit("epe") == "px"
+    assert report._unit("accel_mm_per_frame2") == "mm/frame²"
+
+
+def test_plot_history_errors(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="empty history"):
+        plot_history([], tmp_path / "m.png")
+    with pytest.raises(ValueError, match="no metrics"):
+        plot_history([{"stage": "initial", "kind": None, "cycle": 0, "epe": None}], tmp_path / "m.png")
+    with pytest.raises(ValueError, match=r"history\[1\]"):
+        plot_history([{"stage": "initial", "epe": 1.0}, {"epe": 2.0}], tmp_path / "m.png")
+    assert not any(tmp_path.iterdir())
+
+
+# --- overlay_frames ------------------------------------------------------------------------
+
+
+def panels(mosaic: torch.Tensor, h: int, w: int) -> list[torch.Tensor]:
+    return [mosaic[:, :h, :w], mosaic[:, :h, w:], mosaic[:, h:, :w], mosaic[:, h:, w:]]
+
+
+def test_overlay_shape_and_flow_panels() -> None:
+    T, H, W = 3, 40, 56
+    frames = torch.randint(0, 256, (T, 3, H, W), dtype=torch.uint8)
+    zero, moving = torch.zeros(T - 1, 2, H, W), uniform_flow(T - 1, 2.0, -1.0, H, W)
+    original = frames.clone()
+    out = overlay_frames(frames, zero, moving, None, None, None)
+    assert out.shape == (T - 1, 3, 2 * H, 2 * W) and out.dtype == torch.uint8
+    for t in range(T - 1):
+        frame, before, after, pose = panels(out[t], H, W)
+        below = (slice(None), slice(H // 2, None), slice(None))  # away from the labels
+        assert torch.equal(frame[below], frames[t][below]) and torch.equal(pose[below], frames[t][below])
+        assert (before[below] >= 250).all()  # zero flow is white
+        assert (after[below].int().amin(0) < 200).all()  # saturated colour, not white
+        assert torch.equal(after[below], flow_image(moving[t])[below])  # it is the largest: full scale
+    # labels in the top band: each panel its own ("frame 0" is not written over the pose panel)
+    frame, _, _, pose = panels(out[0], H, W)
+    assert not torch.equal(frame[:, :12], frames[0][:, :12]) and not torch.equal(pose[:, :12], frames[0][:, :12])
+    assert not torch.equal(frame[:, :12], pose[:, :12])
+    assert torch.equal(frames, original)  # the input is not drawn on
+
+
+def test_overlay_common_scale() -> None:
+    H, W = 16, 20
+    frames = torch.zeros(2, 3, H, W, dtype=torch.uint8)
+    small, large = uniform_flow(1, 1.0, 0.0, H, W), uniform_flow(1, 4.0, 0.0, H, W)
+    a = overlay_frames(frames, small, large, None, None, None)[0]
+    b = overlay_frames(frames, large, large, None, None, None)[0]
+    _, small_img, large_img, _ = panels(a, H, W)
+    # the smaller flow is paler than the larger one (same direction, same scale)
+    assert (small_img[:, -4:].int().sum(0) > large_img[:, -4:].int().sum(0)).all()
+    assert torch.equal(panels(b, H, W)[1][:, -4:], large_img[:, -4:])
+
+
+def test_overlay_skeleton_colours() -> None:
+    scene = make_scene(motion="run", frames=4, height=64, width=96, seed=0)
+    T, _, H, W = scene.frames.shape
+    after = scene.gt.joints2d
+    before = after + torch.tensor([-25.0, 0.0])  # 25 px to the left
+    out = overlay_frames(scene.frames, scene.gt.flow, scene.gt.flow, before, after, scene.gt.joints_layout)
+    assert out.shape == (T - 1, 3, 2 * H, 2 * W)
+    for t in range(T - 1):
+        pose = panels(out[t], H, W)[3].int()
+        for j in (1, 4):  # knees: below the label band
+            x, y = after[t, j].round().long().tolist()
+            r, g, b = pose[:, y, x].tolist()
+            assert g > 200 and r < 60 and b < 60, (t, j, (r, g, b))
+            x, y = before[t, j].round().long().tolist()
+            r, g, b = pose[:, y, x].tolist()
+            assert r > 200 and g < 60 and b < 60, (t, j, (r, g, b))
+    without = overlay_frames(scene.frames, scene.gt.flow, scene.gt.flow, None, None, None)
+    below = (slice(None), slice(H + 20, None), slice(W, None))
+    assert torch.equal(without[0][below], scene.frames[0][:, 20:])
+    assert not torch.equal(out[0][below], scene.frames[0][:, 20:])
+
+
+def test_overlay_downscales() -> None:
+    T, H, W = 2, 60, 100
+    scene_like = torch.zeros(T, 3, H, W, dtype=torch.uint8)
+    joints = torch.tensor([[float(x), 40.0] for x in range(20, 90, 5)]).expand(T, 14, 2).clone()
+    flows = torch.zeros(1, 2, H, W), torch.ones(1, 2, H, W)
+    out = overlay_frames(scene_like, *flows, None, joints, "lsp14", max_side=100)
+    assert out.shape == (1, 3, 60, 100)  # the 120 x 200 mosaic halved
+    pose = panels(out[0], 30, 50)[3]
+    r, g, b = pose[:, 20, 25].tolist()  # joint 6 at (50, 40) px -> (24.75, 19.75) px
+    assert g > 200 and r < 60 and b < 60, (r, g, b)
+
+
+def test_overlay_rejects_bad_shapes() -> None:
+    T, H, W = 3, 8, 10
+    frames = torch.zeros(T, 3, H, W, dtype=torch.uint8)
+    flow = torch.zeros(T - 1, 2, H, W)
+    joints = torch.zeros(T, 14, 2)
+    with pytest.raises(ValueError, match=r"frames.*\(T, 3, H, W\)"):
+        overlay_frames(frames.float(), flow, flow, None, None, None)
+    with pytest.raises(ValueError, match=r"frames.*\(T, 3, H, W\)"):
+        overlay_frames(frames[:, :1], flow, flow, None, None, None)
+    with pytest.raises(ValueError, match=r"flow_before.*\(2, 2, 8, 10\).*\(3, 2, 8, 10\)"):
+        overlay_frames(frames, torch.zeros(T, 2, H, W), flow, None, None, None)
+    with pytest.raises(ValueError, match=r"flow_after.*\(2, 2, 8, 10\)"):
+        overlay_frames(frames, flow, torch.zeros(T - 1, 2, H, W + 1), None, None, None)
+    with pytest.raises(ValueError, match=r"joints_after.*\(3, 14, 2\).*lsp14"):
+        overlay_frames(frames, flow, flow, joints, torch.zeros(T, 17, 2), "lsp14")
+    with pytest.raises(ValueError, match=r"joints_before.*\(3, 17, 2\).*coco17"):
+        overlay_frames(frames, flow, flow, joints, None, "coco17")
+    with pytest.raises(ValueError, match="layout is required"):
+        overlay_frames(frames, flow, flow, joints, joints, None)
+    with pytest.raises(ValueError, match="T >= 2"):
+        overlay_frames(frames[:1], flow[:0], flow[:0], None, None, None)
+
+
+# --- write_video ---------------------------------------------------------------------------
+
+
+def read_video(path: Path) -> list[np.ndarray]:
+    capture = cv2.VideoCapture(str(path))
+    assert capture.isOpened()
+    frames = []
+    while True:
+        ok, frame = capture.read()
+        if not ok:
+            break
+        frames.append(frame)
+    capture.release()
+    return frames
+
+
+def grey_frames(n: int, h: int, w: int) -> torch.Tensor:
+    levels = torch.tensor([30, 80, 130, 180, 230][:n], dtype=torch.uint8)
+    return levels.view(n, 1, 1, 1).expand(n, 3, h, w).contiguous()
+
+
+def test_write_video_round_trip(tmp_path: Path) -> None:
+    frames = grey_frames(5, 48, 64)
+    path = write_video(frames, tmp_path / "overlay.mp4", fps=10)
+    assert path == tmp_path / "overlay.mp4"
+    back = read_video(path)
+    assert len(back) == 5 and all(f.shape == (48, 64, 3) for f in back)
+    means = [float(f.mean()) for f in back]
+    assert all(abs(m - level) < 8 for m, level in zip(means, (30, 80, 130, 180, 230))), means
+    assert [p.name for p in tmp_path.iterdir()] == ["overlay.mp4"]  # no temporary left
+
+
+def test_write_video_odd_size_and_colour(tmp_path: Path) -> None:
+    frames = torch.zeros(3, 3, 33, 47, dtype=torch.uint8)
+    frames[:, 0] = 220  # red in RGB
+    back = read_video(write_video(frames, tmp_path / "odd.mp4", fps=5))
+    assert len(back) == 3 and all(f.shape == (34, 48, 3) for f in back)
+    b, g, r = (float(back[0][..., c].mean()) for c in range(3))  # OpenCV reads BGR
+    assert r > 180 and g < 50 and b < 50, (r, g, b)
+
+
+def test_write_video_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    with pytest.raises(ValueError, match=r"frames_uint8.*\(N, 3, H, W\)"):
+        write_video(torch.zeros(2, 3, 8, 8), tmp_path / "v.mp4", fps=5)
+    with pytest.raises(ValueError, match="fps"):
+        write_video(grey_frames(2, 8, 8), tmp_path / "v.mp4", fps=0)
+    with pytest.raises(FileNotFoundError, match="missing"):
+        write_video(grey_frames(2, 8, 8), tmp_path / "missing" / "v.mp4", fps=5)
+    tried = []
+
+    class ClosedWriter:
+        def __init__(self, filename: str, fourcc: int, fps: float, size: tuple[int, int]) -> None:
+            tried.append(fourcc)
+
+        def isOpened(self) -> bool:
+            return False
+
+        def release(self) -> None:
+            pass
+
+    monkeypatch.setattr(report.cv2, "VideoWriter", ClosedWriter)
+    with pytest.raises(RuntimeError, match=r"v\.mp4.*mp4v or avc1"):
+        write_video(grey_frames(2, 8, 8), tmp_path / "v.mp4", fps=5)
+    assert tried == [cv2.VideoWriter_fourcc(*"mp4v"), cv2.VideoWriter_fourcc(*"avc1")]
+    assert not any(tmp_path.iterdir())
