@@ -170,3 +170,29 @@ def test_2d_mode_with_a_flow_ensemble(shared, tiny_scene, tmp_path):
     assert (tmp_path / "run/raft_finetuned.pt").is_file() and (tmp_path / "run/raft_finetuned_m1.pt").is_file()
     record = result.history[1]
     assert record["kind"] == "flow" and "kp2d_px" in result.history[2]
+
+
+# --- command line ---------------------------------------------------------------------------------
+
+
+def test_bootstrap_cli_names_a_missing_scene_and_writes_nothing(tmp_path, capsys):
+    from lit_boot.cli import main
+
+    config = str(runner_module.Path(__file__).resolve().parents[1] / "configs/bootstrap.yaml")
+    code = main(["bootstrap", "--config", config, "--data.scene", str(tmp_path / "nope"), "--out", str(tmp_path / "run")])
+    assert code == 2 and str(tmp_path / "nope") in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.shared
+def test_demo_runs_the_method_and_a_rerun_resumes(shared, tmp_path, capsys, monkeypatch):
+    from lit_boot.cli import main
+
+    monkeypatch.setenv("LIT_BOOT_CHECKPOINTS", str(shared / "checkpoints"))
+    args = ["demo", "--out", str(tmp_path / "demo"), "--frames", "2", "--height", "64", "--width", "96", "--epochs", "1"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "| epe_person |" in out and "| mpjpe_mm |" in out and "stage 3/3 flow_2" in out
+    assert (tmp_path / "demo/bootstrap/summary.json").is_file()
+    assert main(args) == 0  # resumes: every stage is loaded, none runs
+    assert "stage 1/3" not in capsys.readouterr().out

@@ -69,6 +69,8 @@ class BootstrapResult:
         first: dict[str, float] = {}
         last: dict[str, float] = {}
         for record in self.history:
+            if record.get("rolled_back"):
+                continue
             for k, v in record.items():
                 if isinstance(v, float) and k != "cycle":
                     first.setdefault(k, v)
@@ -177,11 +179,40 @@ class Bootstrap:
             self.pending_weights[member] = None
         return self.models[member]
 
+    # --- the stages --------------------------------------------------------------------------------
+    def _flow_stage(
+        self, name: str, scene: Scene, initial: torch.Tensor, person_px: float, accelerator: str, precision: str
+    ) -> tuple[dict[str, Any], torch.Tensor]:
+        """Fine-tune every ensemble member on the stick-man of ``scene``'s poses; the record
+        and the members' mean flow (T-1, 2, H, W) px."""
+        cfg, n = self.config, len(self.models)
+        flows, reports = [], []
+        for m in range(n):
+            model = self._model(m, person_px, fresh=cfg.restart_flow)
+            loggers = self._loggers(name + (f"_m{m}" if n > 1 else ""))
+            reports.append(fine_tune_flow(model, scene, cfg.mode, cfg.epochs, accelerator, precision, loggers, cfg.progress_bar))
+            flows.append(predict_flows(model, scene, accelerator, precision))
+        mean = torch.stack(flows).mean(0)
+        person = self.models[0].person_region(self.models[0].sketch_masks)
+        record = {**flow_metrics(scene, mean), "drift_px": drift(mean, initial, person),
+                  "agreement_px": agreement(mean, *pose_points(scene, cfg.mode)),
+                  "info": {"target": reports[0], "sketch": self.models[0].hparams["sketch"]}}  # fmt: skip
+        return record, mean
+
+    def _pose_stage(self, name: str, scene: Scene, flows: torch.Tensor) -> tuple[dict[str, Any], PoseResult]:
+        """Refine ``scene``'s poses against ``flows``; the record and the result."""
+        cfg = self.config
+        result = refine_poses_stage(scene, flows, cfg.mode, cfg.pose_kwargs(), cfg.pose_steps, cfg.early_stop,
+                                    cfg.pose_accelerator, self._loggers(name), cfg.progress_bar)  # fmt: skip
+        refined = result.apply_to(scene)
+        record = {**pose_metrics(refined, cfg.mode), "agreement_px": agreement(flows, *pose_points(refined, cfg.mode)),
+                  "info": {"steps": result.steps, "stopped_early": result.stopped_early, "loss": result.loss}}  # fmt: skip
+        return record, result
+
     # --- the run -----------------------------------------------------------------------------------
     def run(self) -> BootstrapResult:
         """Run (or resume) every stage; write the run's outputs; return the result."""
         cfg = self.config
-        self._prepare_folder()
         scene = self.scene if self.scene is not None else load_scene(self.scene_arg)
         if scene.num_frames < 2:
             raise ValueError(f"scene {scene.name!r}: needs at least 2 frames, has {scene.num_frames}")
@@ -189,6 +220,7 @@ class Bootstrap:
             raise ValueError(f"scene {scene.name!r}: 3D mode needs 3D joints with cameras (use mode '2d')")
         if cfg.mode == "2d" and scene.keypoints2d is None:
             raise ValueError(f"scene {scene.name!r}: 2D mode needs 2D keypoints")
+        self._prepare_folder()
         scene = average_poses(scene, cfg.pose_ensemble, cfg.mode)
         initial_scene = scene
         L.seed_everything(cfg.seed, verbose=False)
@@ -201,7 +233,6 @@ class Bootstrap:
         stages = cfg.stages()
         history: list[dict[str, Any]] = []
         seconds: dict[str, float] = {}
-        guard_events: list[dict[str, Any]] = []
 
         # initial: pretrained RAFT's flow and the initial poses
         initial_dir = self._stage_dir("initial")
@@ -242,45 +273,29 @@ class Bootstrap:
                     scene = result.apply_to(scene)
                 history.append(record)
                 seconds[name] = record["info"]["seconds"]
+                if "guard" in record:  # the drift guard stopped the run here
+                    break
                 continue
             L.seed_everything(cfg.seed + index, verbose=False)
-            points, keep = pose_points(scene, cfg.mode)
             start = time.perf_counter()
             before_agreement = history[-1]["agreement_px"]
             if kind == "flow":
                 what = f"FlowTTT x{n_members}, {cfg.epochs} epochs, {precision} on {accelerator}"
                 print(stage_header(index, len(stages), name, what), flush=True)
-                stage_flows, reports = [], []
-                for m in range(n_members):
-                    model = self._model(m, person_px, fresh=cfg.restart_flow)
-                    suffix = f"_m{m}" if n_members > 1 else ""
-                    reports.append(fine_tune_flow(model, scene, cfg.mode, cfg.epochs, accelerator, precision,
-                                                  self._loggers(name + suffix), cfg.progress_bar))  # fmt: skip
-                    stage_flows.append(predict_flows(model, scene, accelerator, precision))
-                new_flows = torch.stack(stage_flows).mean(0)
-                person = self.models[0].person_region(self.models[0].sketch_masks)
-                record = {"stage": name, "kind": "flow", "cycle": cycle, **flow_metrics(scene, new_flows),
-                          "drift_px": drift(new_flows, initial, person), "agreement_px": agreement(new_flows, points, keep),
-                          "info": {"target": reports[0], "sketch": self.models[0].hparams["sketch"]}}  # fmt: skip
+                record, new_flows = self._flow_stage(name, scene, initial, person_px, accelerator, precision)
                 new_scene, new_result = scene, result
             else:
                 what = f"{'PoseRefiner' if cfg.mode == '3d' else 'KeypointRefiner'}, {cfg.pose_steps} steps on {cfg.pose_accelerator}"
                 print(stage_header(index, len(stages), name, what), flush=True)
-                new_result = refine_poses_stage(scene, flows, cfg.mode, cfg.pose_kwargs(), cfg.pose_steps, cfg.early_stop,
-                                                cfg.pose_accelerator, self._loggers(name), cfg.progress_bar)  # fmt: skip
-                new_scene = new_result.apply_to(scene)
-                new_flows = flows
-                new_points, new_keep = pose_points(new_scene, cfg.mode)
-                record = {"stage": name, "kind": "pose", "cycle": cycle, **pose_metrics(new_scene, cfg.mode),
-                          "agreement_px": agreement(flows, new_points, new_keep),
-                          "info": {"steps": new_result.steps, "stopped_early": new_result.stopped_early,
-                                   "loss": new_result.loss}}  # fmt: skip
+                record, new_result = self._pose_stage(name, scene, flows)
+                new_scene, new_flows = new_result.apply_to(scene), flows
+            record = {"stage": name, "kind": kind, "cycle": cycle, **record}
             record["info"]["seconds"] = time.perf_counter() - start
             worse = record["agreement_px"] - before_agreement
             stop = cfg.drift_guard != "record" and worse > cfg.drift_tolerance
             if stop:
-                guard_events.append({"stage": name, "agreement_before": before_agreement,
-                                     "agreement_after": record["agreement_px"], "action": cfg.drift_guard})  # fmt: skip
+                record["guard"] = {"agreement_before": before_agreement, "agreement_after": record["agreement_px"],
+                                   "action": cfg.drift_guard}  # fmt: skip
             folder.mkdir(parents=True, exist_ok=True)
             if stop and cfg.drift_guard == "rollback":
                 record["rolled_back"] = True
@@ -310,6 +325,7 @@ class Bootstrap:
                 logger.log_metrics(metrics, step=i)
         for logger in summary_loggers:
             logger.save()
+        guard_events = [{"stage": r["stage"], **r["guard"]} for r in history if "guard" in r]
         out = BootstrapResult(self.out, scene, initial_scene, initial, flows, result, history, seconds)
         write_outputs(out, self._settings(), guard_events, accelerator, precision, self.config)
         return out
