@@ -10,7 +10,6 @@ from __future__ import annotations
 import io
 import math
 import os
-import uuid
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -21,7 +20,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..core.joints import JointLayout, get_layout
-from ..data.atomic import atomic_write_bytes
+from ..data.atomic import atomic_file, atomic_write_bytes
 from ..data.visualize import draw_skeleton, flow_image
 
 __all__ = ["overlay_frames", "plot_history", "write_video"]
@@ -210,10 +209,8 @@ def write_video(frames_uint8: torch.Tensor, path: str | os.PathLike, fps: float)
     if frames.shape[3] % 2:
         frames = torch.cat([frames, frames[:, :, :, -1:]], dim=3)
     H, W = frames.shape[2:]
-    # the container is chosen from the extension, so the temporary name keeps it
-    tmp = path.parent / f".{path.stem}.{uuid.uuid4().hex[:12]}.partial{path.suffix or '.mp4'}"
     codecs = ("mp4v", "avc1")
-    try:
+    with atomic_file(path) as tmp:  # the temporary name keeps the extension: OpenCV picks the container from it
         for codec in codecs:
             writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*codec), float(fps), (int(W), int(H)))
             if writer.isOpened():
@@ -231,10 +228,4 @@ def write_video(frames_uint8: torch.Tensor, path: str | os.PathLike, fps: float)
             writer.release()
         if not tmp.is_file() or tmp.stat().st_size == 0:
             raise RuntimeError(f"write_video({path}): OpenCV wrote no data with codec {codec!r}")
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return path

@@ -14,7 +14,24 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_directory", "atomic_write_bytes"]
+__all__ = ["atomic_directory", "atomic_file", "atomic_write_bytes"]
+
+
+@contextmanager
+def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path`` (hidden, same suffix, so writers that pick a
+    format from the extension still can); when the block succeeds the file written there is
+    fsynced and renamed onto ``path``, when it fails it is removed."""
+    path = Path(path)
+    tmp = _temp_name(path, "partial" + path.suffix)
+    try:
+        yield tmp
+        with open(tmp, "rb") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
@@ -23,20 +40,9 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     An existing file at ``path`` is replaced only once the new content is complete.
     Returns the path.
     """
-    path = Path(path)
-    tmp = _temp_name(path, "partial")
-    # os.open (not mkstemp) so that the file gets the usual permissions (0o666 minus umask)
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    with atomic_file(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
 
 
 def _temp_name(path: Path, kind: str) -> Path:

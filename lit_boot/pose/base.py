@@ -27,6 +27,7 @@ from lightning.pytorch.trainer.states import TrainerFn
 
 from ..core import Scene
 from .keypoints import CONFIDENCE_MODES
+from .losses import flow_residual, inside_image
 from .result import PoseResult
 from .stopping import LossPlateauStopping
 
@@ -193,6 +194,14 @@ class RefinerBase(L.LightningModule):
         else:
             total = sum(p.sum() * 0.0 for p in self.parameters())
         return total, self.objective.split(residuals) if with_terms else {}
+
+    def flow_term(self, points: torch.Tensor, pixel_scale: float = 1.0) -> torch.Tensor:
+        """L_opt's residual (T-1, J, 2) for image points (T, J, 2) px under ``self.flows``; zero
+        for points outside the image at t-1 when ``flow_inside_only``."""
+        r = flow_residual(points, self.flows, pixel_scale)
+        if self.hparams.flow_inside_only:
+            r = r * inside_image(points[:-1].detach(), *self.image_size)[..., None]
+        return r
 
     def loss_terms(self) -> dict[str, torch.Tensor]:
         """Each weighted term's current value by name (without gradient)."""

@@ -21,6 +21,7 @@ import torch.nn.functional as F
 from ..metrics import sample_flow_at_points
 
 __all__ = [
+    "inside_image",
     "smooth_l1_per_frame",
     "flow_residual",
     "temporal_residual",
@@ -120,3 +121,8 @@ def bone_length_loss(joints: torch.Tensor, bones: Sequence[tuple[int, int]] | to
     if len(bones) == 0:
         return joints.sum() * 0.0
     return temporal_loss(bone_lengths(joints, bones))
+
+def inside_image(points: torch.Tensor, height: int, width: int) -> torch.Tensor:
+    """(..., J) float: 1 where the point (..., J, 2) px lies within the image, else 0."""
+    upper = points.new_tensor([width - 1, height - 1])
+    return ((points >= 0) & (points <= upper)).all(dim=-1).float()

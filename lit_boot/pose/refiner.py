@@ -28,7 +28,7 @@ from ..metrics import AccelerationError, MeanPerJointPositionError
 from .base import RefinerBase
 from .camera import CameraModel
 from .keypoints import keypoints_for_layout
-from .losses import bone_lengths, bone_matrix, flow_residual, temporal_residual
+from .losses import bone_lengths, bone_matrix, inside_image, temporal_residual
 from .objective import Objective, Term
 from .result import PoseResult
 
@@ -47,11 +47,6 @@ class PoseLossWeights:
     bone: float = 1.0e4
     proj_smooth: float = 0.0
 
-
-def inside_image(points: torch.Tensor, height: int, width: int) -> torch.Tensor:
-    """(..., J) float: 1 where the point (..., J, 2) px lies within the image, else 0."""
-    upper = points.new_tensor([width - 1, height - 1])
-    return ((points >= 0) & (points <= upper)).all(dim=-1).float()
 
 
 class PoseRefiner(RefinerBase):
@@ -157,10 +152,7 @@ class PoseRefiner(RefinerBase):
         P = self.projected()
         out: dict[str, torch.Tensor] = {}
         if "opt" in names:
-            r = flow_residual(P, self.flows, k)
-            if self.hparams.flow_inside_only:
-                r = r * inside_image(P[:-1].detach(), *self.image_size)[..., None]
-            out["opt"] = r
+            out["opt"] = self.flow_term(P, k)
         if "3d" in names:
             out["3d"] = X - self.initial_joints
         if "2d" in names:

@@ -22,9 +22,8 @@ from ..core import Scene
 from ..metrics import MeanPerJointPositionError
 from .base import RefinerBase
 from .keypoints import confidence_weights
-from .losses import flow_residual, temporal_residual
+from .losses import temporal_residual
 from .objective import Objective, Term
-from .refiner import inside_image
 from .result import PoseResult
 
 __all__ = ["KeypointLossWeights", "KeypointRefiner"]
@@ -99,10 +98,7 @@ class KeypointRefiner(RefinerBase):
         x, names = self.keypoints, self.objective.names
         out: dict[str, torch.Tensor] = {}
         if "opt" in names:
-            r = flow_residual(x, self.flows)
-            if self.hparams.flow_inside_only:
-                r = r * inside_image(x[:-1].detach(), *self.image_size)[..., None]
-            out["opt"] = r
+            out["opt"] = self.flow_term(x)
         if "init" in names:
             out["init"] = x - self.initial_keypoints
         if "smooth" in names:
