@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import hashlib
 import json
 
@@ -146,6 +147,10 @@ def test_interrupted_run_resumes_after_the_last_finished_stage(shared, tiny_scen
     result = bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, **FAST)
     assert len(calls) == 1  # flow_2 only: flow_1 was loaded
     assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1", "flow_2"]
+    # the summary dashboard holds each stage once, although the first run logged some of them too
+    with open(tmp_path / "run/logs/csv/summary/metrics.csv") as f:
+        assert [int(row["step"]) for row in csv.DictReader(f)] == [0, 1, 2, 3]
+    assert len(list((tmp_path / "run/logs/tensorboard/summary").glob("events.out.tfevents.*"))) == 1
     with pytest.raises(ValueError, match="cycles"):
         bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, cycles=2, **FAST)
 

@@ -229,6 +229,8 @@ class Bootstrap:
         n_members = 1 + len(cfg.flow_ensemble)
         self.models, self.pending_weights = [None] * n_members, [None] * n_members
         accelerator, precision = self._accelerator(), self._precision()
+        for kind in ("tensorboard", "csv"):  # rebuilt whole on every (resumed) run: no duplicates
+            shutil.rmtree(self.out / "logs" / kind / "summary", ignore_errors=True)
         summary_loggers = self._loggers("summary")
         stages = cfg.stages()
         history: list[dict[str, Any]] = []
@@ -273,6 +275,7 @@ class Bootstrap:
                     scene = result.apply_to(scene)
                 history.append(record)
                 seconds[name] = record["info"]["seconds"]
+                log_stage_images(summary_loggers, index, name, scene, flows, cfg.mode)
                 if "guard" in record:  # the drift guard stopped the run here
                     break
                 continue
