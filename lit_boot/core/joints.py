@@ -10,6 +10,8 @@ Some layouts lack a joint the stick-man needs (COCO has no neck). Such joints ar
 *virtual*: weighted means of real joints, appended after the real ones. Bone indices may
 point at them; :meth:`JointLayout.with_virtual` appends them to an array of joints.
 
+The 24 SMPL joints are the layout ``"smpl"`` (:data:`SMPL24`).
+
 Mappings to LSP-14 are (14, K) weight matrices: each LSP joint is a weighted mean of source
 joints, or undefined (a zero row; ``defined`` is False there).
 """
@@ -26,6 +28,8 @@ __all__ = [
     "COCO17",
     "H36M17",
     "MEDIAPIPE33",
+    "SMPL24",
+    "SMPL24_TO_LSP14",
     "LAYOUTS",
     "get_layout",
     "H36M_J17_TO_J14",
@@ -196,11 +200,27 @@ MEDIAPIPE33 = JointLayout(
     root=(23, 24),
 )
 
-LAYOUTS: dict[str, JointLayout] = {l.name: l for l in (LSP14, COCO17, H36M17, MEDIAPIPE33)}
+# --- SMPL-24: the kinematic joints of the SMPL body model (3DPW's jointPositions) -------------
+_SMPL_NAMES = (
+    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
+    "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck", "left_collar",
+    "right_collar", "head", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
+    "left_wrist", "right_wrist", "left_hand", "right_hand",
+)  # fmt: skip
+_SMPL_PARENTS = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21)
+_SMPL_BONES = tuple((p, c) for c, p in enumerate(_SMPL_PARENTS) if p >= 0)
+#: The 24 SMPL joints (layout name ``"smpl"``); bones = the kinematic tree.
+SMPL24 = JointLayout(name="smpl", names=_SMPL_NAMES, sketch_bones=_SMPL_BONES, length_bones=_SMPL_BONES, root=(0,))
+#: SMPL-24 index of each LSP-14 joint. Approximations: SMPL has no head top, its "head" joint
+#: (the centre of the head, about 10 cm below the top) stands in; SMPL's hips, neck and
+#: shoulders are its kinematic joints, not the marker-based joints of LSP / Human3.6M.
+SMPL24_TO_LSP14 = (8, 5, 2, 1, 4, 7, 21, 19, 17, 16, 18, 20, 12, 15)
+
+LAYOUTS: dict[str, JointLayout] = {l.name: l for l in (LSP14, COCO17, H36M17, MEDIAPIPE33, SMPL24)}
 
 
 def get_layout(layout: str | JointLayout) -> JointLayout:
-    """Look a layout up by name (``lsp14``, ``coco17``, ``h36m17``, ``mediapipe33``)."""
+    """Look a layout up by name (``lsp14``, ``coco17``, ``h36m17``, ``mediapipe33``, ``smpl``)."""
     if isinstance(layout, JointLayout):
         return layout
     try:
@@ -213,8 +233,8 @@ def mapping_matrix(src: str | JointLayout, dst: str | JointLayout = "lsp14") -> 
     """(K_dst, K_src) weights mapping joints of ``src`` to ``dst``; undefined rows are zero.
 
     Defined: identity; H36M-17, COCO-17 and MediaPipe-33 to LSP-14 (COCO and MediaPipe have
-    no head top: that row is zero; the neck is the shoulders' midpoint); MediaPipe-33 to
-    COCO-17.
+    no head top: that row is zero; the neck is the shoulders' midpoint); SMPL-24 to LSP-14
+    (:data:`SMPL24_TO_LSP14`: the head top is SMPL's head joint); MediaPipe-33 to COCO-17.
     """
     src, dst = get_layout(src), get_layout(dst)
     w = torch.zeros(dst.num_joints, src.num_joints)
@@ -222,6 +242,9 @@ def mapping_matrix(src: str | JointLayout, dst: str | JointLayout = "lsp14") -> 
         return torch.eye(src.num_joints)
     if dst.name == "lsp14" and src.name == "h36m17":
         w[torch.arange(14), torch.tensor(H36M_J17_TO_J14)] = 1.0
+        return w
+    if dst.name == "lsp14" and src.name == "smpl":
+        w[torch.arange(14), torch.tensor(SMPL24_TO_LSP14)] = 1.0
         return w
     if dst.name == "coco17" and src.name == "mediapipe33":
         w[torch.arange(17), torch.tensor(MEDIAPIPE33_TO_COCO17)] = 1.0
