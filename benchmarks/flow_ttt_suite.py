@@ -8,7 +8,8 @@ from the same pretrained weights.
 
 Usage:
   python benchmarks/flow_ttt_suite.py [--weights ../shared/checkpoints/raft-small.pth]
-      [--epochs 8] [--lr 1e-5] [--sketch-weight 1] [--size 3] [--conditions gt,joints3d,keypoints2d]
+      [--epochs 8] [--lr 1e-5] [--sketch-weight 1] [--loss-beta 1] [--target-updates N]
+      [--freeze-batchnorm] [--size 3] [--conditions gt,joints3d,keypoints2d]
       [--frames 12] [--height 128] [--width 256] [--json out.json]
 
 Conventions: EPE = mean over pixels of all pairs (torchvision's convention), over valid,
@@ -41,14 +42,19 @@ SCENES = [
 
 
 @torch.no_grad()
-def evaluate(model: torch.nn.Module, scene, updates: int = 32) -> dict[str, float]:
-    """EPE all / person / background / at joints over every pair of ``scene``."""
+def predict_all(model: torch.nn.Module, scene, updates: int = 32) -> torch.Tensor:
+    """The flow of every pair of ``scene`` (T-1, 2, H, W) px."""
     model.eval()
+    return torch.stack([predict_flow(model, scene.frames[t], scene.frames[t + 1], updates).float()[0]
+                        for t in range(scene.num_frames - 1)])  # fmt: skip
+
+
+def score(flows: torch.Tensor, scene) -> dict[str, float]:
+    """EPE all / person / background / at joints over every pair of ``scene``."""
     m = {k: EndPointError() for k in ("all", "person", "background")}
     joints = PointEndPointError(mode="nearest")
     gt = scene.gt
-    for t in range(scene.num_frames - 1):
-        flow = predict_flow(model, scene.frames[t], scene.frames[t + 1], updates).float()
+    for t, flow in enumerate(flows[:, None]):
         valid = (gt.flow_valid[t] & ~gt.flow_occluded[t])[None]
         person = gt.person_mask[t][None]
         m["all"].update(flow, gt.flow[t][None], valid)
@@ -61,12 +67,17 @@ def evaluate(model: torch.nn.Module, scene, updates: int = 32) -> dict[str, floa
     return out
 
 
+def evaluate(model: torch.nn.Module, scene) -> dict[str, float]:
+    return score(predict_all(model, scene), scene)
+
+
 def fine_tune(scene, source: str, args) -> tuple[dict[str, float], dict[str, float], float]:
     """FlowTTT on one scene with targets from ``source``; returns (EPEs, target report, seconds)."""
     torch.manual_seed(0)
     model = FlowTTT(
         weights=args.weights, lr=args.lr, train_updates=args.train_updates, sketch_weight=args.sketch_weight,
-        crop_margin=args.crop_margin, train_parts=args.train_parts,
+        crop_margin=args.crop_margin, train_parts=args.train_parts, loss_beta=args.loss_beta,
+        target_updates=args.target_updates, freeze_batchnorm=args.freeze_batchnorm,
         sketch=SketchConfig(footprint=args.footprint, size=args.size, guard=not args.no_guard),
     )  # fmt: skip
     data = SceneFlowData(scene, pose_source=source)
@@ -77,7 +88,14 @@ def fine_tune(scene, source: str, args) -> tuple[dict[str, float], dict[str, flo
     start = time.perf_counter()
     trainer.fit(model, datamodule=data)
     seconds = time.perf_counter() - start
-    return evaluate(model.raft, scene), model.target_report, seconds
+    tuned = predict_all(model.raft, scene)
+    epe = score(tuned, scene)
+    if args.composite_margins:  # the tuned flow near the sketch only, pretrained RAFT's elsewhere
+        original = predict_all(load_raft("raft_small", args.weights), scene)
+        for margin in [int(m) for m in args.composite_margins.split(",")]:
+            region = model.person_region(model.sketch_masks, margin)[:, None]
+            epe[f"composite_{margin}"] = score(torch.where(region, tuned, original), scene)
+    return epe, model.target_report, seconds
 
 
 def main() -> None:
@@ -92,6 +110,10 @@ def main() -> None:
     p.add_argument("--size", type=int, default=3, help="footprint size, px (cross radius 15 at ~450 px tall people)")
     p.add_argument("--crop-margin", type=int, default=None)
     p.add_argument("--train-parts", default="all")
+    p.add_argument("--loss-beta", type=float, default=1.0, help="SmoothL1 beta, px (the authors: 1)")
+    p.add_argument("--target-updates", type=int, default=None, help="updates of the base flow (default: train updates)")
+    p.add_argument("--freeze-batchnorm", action="store_true")
+    p.add_argument("--composite-margins", default="", help="e.g. 4,8: also score tuned-near-the-sketch flows")
     p.add_argument("--no-guard", action="store_true")
     p.add_argument("--conditions", default="gt,joints3d,keypoints2d")
     p.add_argument("--scenes", default=",".join(str(i) for i in range(len(SCENES))))

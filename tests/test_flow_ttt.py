@@ -35,6 +35,19 @@ def test_targets_are_the_sketch_painted_over_rafts_own_flow(scene):
     assert report["target/epe_sketch_painted"] < report["target/epe_base_painted"]  # GT joints beat a random net
 
 
+def test_target_updates_and_loss_beta(scene):
+    model = FlowTTT(weights=None, target_updates=4, loss_beta=0.1, **FAST)
+    model.build_targets(SceneFlowData(scene, pose_source="gt"))
+    base = torch.cat([predict_flow(model.raft.eval(), scene.frames[t], scene.frames[t + 1], 4) for t in range(2)])
+    outside = ~model.sketch_masks[:, None].expand_as(base)
+    torch.testing.assert_close(model.targets[outside], base[outside])  # painted over the 4-update flow
+    # below beta the loss is quadratic: 0.5 r^2 / beta; above it linear: r - beta / 2
+    target, weight = torch.zeros(1, 2, 2, 2), torch.ones(1, 2, 2)
+    small, large = torch.full_like(target, 0.05), torch.full_like(target, 2.0)
+    assert model._loss([small], target, weight).item() == pytest.approx(0.5 * 0.05**2 / 0.1)
+    assert model._loss([large], target, weight).item() == pytest.approx(2.0 - 0.05)
+
+
 def test_fine_tuning_moves_the_flow_towards_the_target(scene, tmp_path):
     torch.manual_seed(0)
     model = FlowTTT(weights=None, lr=1e-3, **FAST)

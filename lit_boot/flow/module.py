@@ -41,6 +41,10 @@ class FlowTTT(L.LightningModule):
         loss: final (SmoothL1 on the last prediction, as the authors) or sequence (RAFT's
             gamma-weighted loss over every update).
         gamma: decay of the sequence loss.
+        loss_beta: SmoothL1's beta, px (1: the authors). Below it the loss is quadratic, so a
+            small beta holds small residuals (the background's) as firmly as large ones.
+        target_updates: RAFT iterations for the base flow the target is painted over (None:
+            ``train_updates``, the authors).
         sketch_weight: weight of sketch pixels in the loss relative to the others (1: every
             pixel alike, the paper).
         train_parts: all (the paper) or update_block (update block and mask predictor only).
@@ -61,6 +65,8 @@ class FlowTTT(L.LightningModule):
         lr: float = 1e-5,
         loss: str = "final",
         gamma: float = 0.8,
+        loss_beta: float = 1.0,
+        target_updates: int | None = None,
         sketch_weight: float = 1.0,
         train_parts: str = "all",
         freeze_batchnorm: bool = False,
@@ -104,7 +110,7 @@ class FlowTTT(L.LightningModule):
         Returns a report: bones rejected by the guard and, with GT flow, the sketch's and the
         base flow's EPE on the painted pixels."""
         loader = datamodule.predict_dataloader()
-        base = self._predict_all(loader, self.hparams.train_updates)
+        base = self._predict_all(loader, self.hparams.target_updates or self.hparams.train_updates)
         inputs = datamodule.sketch_inputs()
         H, W = base.shape[-2:]
         sketch = sketch_from_layout(
@@ -153,9 +159,9 @@ class FlowTTT(L.LightningModule):
         return self
 
     def _loss(self, flows: list[torch.Tensor], target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
-        """SmoothL1 (beta 1) per pixel, weighted mean; over the final or every update."""
+        """SmoothL1 (beta ``loss_beta``) per pixel, weighted mean; over the final or every update."""
         def one(flow: torch.Tensor) -> torch.Tensor:
-            per_pixel = F.smooth_l1_loss(flow.float(), target, beta=1.0, reduction="none").mean(1)
+            per_pixel = F.smooth_l1_loss(flow.float(), target, beta=self.hparams.loss_beta, reduction="none").mean(1)
             return (per_pixel * weight).sum() / weight.sum()
 
         if self.hparams.loss == "final":
@@ -235,9 +241,10 @@ class FlowTTT(L.LightningModule):
             outside = ~self.person_region(self.sketch_masks[idx]).to(self.device)
             self.val_drift.update(flow, self.original[idx].to(self.device), outside)
 
-    def person_region(self, sketch_masks: torch.Tensor) -> torch.Tensor:
-        """The sketch dilated by a margin (B, H, W) bool: 'the person' without ground truth."""
-        r = self.hparams.crop_margin or 16
+    def person_region(self, sketch_masks: torch.Tensor, margin: int | None = None) -> torch.Tensor:
+        """The sketch dilated by ``margin`` px (default: the crop margin, else 16) (B, H, W)
+        bool: 'the person' without ground truth."""
+        r = margin if margin is not None else (self.hparams.crop_margin or 16)
         return F.max_pool2d(sketch_masks[:, None].float(), 2 * r + 1, stride=1, padding=r)[:, 0] > 0
 
     def on_validation_epoch_end(self) -> None:
