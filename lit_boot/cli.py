@@ -10,6 +10,8 @@ Subcommands:
   ``runs/<scene>/<model>`` unless ``--trainer.default_root_dir`` says otherwise.
 - ``lit-boot bootstrap --config configs/bootstrap.yaml --data.scene DIR [--out RUN]`` runs the
   whole method (flow -> pose -> flow) on one scene; rerunning an interrupted run resumes it.
+- ``lit-boot estimate-pose VIDEO --out poses.npz`` runs MediaPipe Pose (the ``mediapipe``
+  extra) on a video file or folder of frames and writes 2D keypoints, 3D joints and cameras.
 - ``lit-boot demo`` makes a synthetic scene, bootstraps it with the local RAFT weights, and
   prints a before/after table.
 
@@ -132,6 +134,40 @@ def demo(argv: list[str]) -> int:
     return 0
 
 
+def _estimate_pose_parser() -> ArgumentParser:
+    parser = ArgumentParser(prog="lit-boot estimate-pose", description=(
+        "Estimate one person's pose in every frame of a video with MediaPipe Pose (pip install "
+        '"lit-boot[mediapipe]"): COCO-17 keypoints, LSP-14 3D joints and weak-perspective cameras.'))  # fmt: skip
+    parser.add_argument("video", type=Path, help="a video file (e.g. .mp4) or a folder of frames")
+    parser.add_argument("--out", type=Path, required=True, help="pose file to write (.npz or .json)")
+    parser.add_argument("--stride", type=int, default=1, help="use every N-th frame")
+    parser.add_argument("--max_frames", "--max-frames", type=int | None, default=None, help="use at most N frames")
+    parser.add_argument("--resize", type=int | float | None, default=None,
+                        help="resize frames first: a height in px (int, e.g. 360) or a scale (float, e.g. 0.5)")  # fmt: skip
+    parser.add_argument("--model_complexity", "--model-complexity", type=int, default=1,
+                        help="0, 1 or 2 (only 1 ships with mediapipe; 0 and 2 are downloaded on first use)")  # fmt: skip
+    parser.add_argument("--min_detection_confidence", "--min-detection-confidence", type=float, default=0.5,
+                        help="MediaPipe's person detector threshold")  # fmt: skip
+    parser.add_argument("--on_jump", "--on-jump", type=str, default="keep", help="keep or drop detections that jump")
+    parser.add_argument("--overwrite", type=bool, nargs="?", const=True, default=False, help="replace --out")
+    return parser
+
+
+def estimate_pose(argv: list[str]) -> int:
+    """``lit-boot estimate-pose``: MediaPipe Pose on a video -> pose file; one summary line."""
+    from .estimate import MediaPipeUnavailable, estimate_pose_file
+
+    args = _estimate_pose_parser().parse_args(argv)
+    options = {k: args[k] for k in ("stride", "max_frames", "resize", "model_complexity",
+                                    "min_detection_confidence", "on_jump")}  # fmt: skip
+    try:
+        _, summary = estimate_pose_file(args.video, args.out, overwrite=args.overwrite, **options)
+    except MediaPipeUnavailable as err:
+        raise CliError(str(err)) from None
+    print(f"{summary}; wrote {args.out}")
+    return 0
+
+
 class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
@@ -144,8 +180,8 @@ def lightning(argv: list[str]) -> int:
     return 0
 
 
-COMMANDS = {"synth": synth, "bootstrap": bootstrap, "demo": demo, "fit": lightning, "validate": lightning,
-            "predict": lightning}
+COMMANDS = {"synth": synth, "bootstrap": bootstrap, "demo": demo, "estimate-pose": estimate_pose, "fit": lightning,
+            "validate": lightning, "predict": lightning}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -41,3 +41,22 @@ __all__ = [
     "list_sintel_scenes",
     "read_sintel",
 ]
+
+# Pose estimates (lit-boot pose files, METRO, DCPose, COCO) and any video.
+from .estimates import ESTIMATE_KINDS, read_coco_keypoints, read_dcpose, read_estimates, read_metro  # noqa: E402
+from .pose_file import POSES_FORMAT, POSES_FORMAT_VERSION, PoseEstimates, load_poses, save_poses  # noqa: E402
+from .video import read_video  # noqa: E402
+
+__all__ += [
+    "ESTIMATE_KINDS",
+    "read_coco_keypoints",
+    "read_dcpose",
+    "read_estimates",
+    "read_metro",
+    "POSES_FORMAT",
+    "POSES_FORMAT_VERSION",
+    "PoseEstimates",
+    "load_poses",
+    "save_poses",
+    "read_video",
+]

@@ -1,0 +1,159 @@
+"""Any video as a :class:`~lit_boot.core.scene.Scene`: an mp4 (anything OpenCV reads) or a folder
+of image frames, optionally with precomputed pose estimates.
+
+Frames are uint8 (T, 3, H, W) RGB. The scene's metadata: ``source`` (the path),
+``frame_indices`` (the 0-based source frame of each scene frame), ``native_size`` ([H, W]
+before resizing), ``stride``, ``source_fps`` and, for folders, ``files`` (the frames' names).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from ...core.scene import Scene
+from ._common import DatasetFormatError, Size, make_scene, read_image, read_images, resize_array
+from .estimates import list_files, read_estimates
+from .pose_file import PoseEstimates
+
+__all__ = ["IMAGE_SUFFIXES", "DEFAULT_FOLDER_FPS", "output_size", "read_video"]
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
+#: Frame rate assumed for a folder of frames when ``fps`` is not given.
+DEFAULT_FOLDER_FPS = 30.0
+Resize = int | float | tuple[int, int]
+
+
+def output_size(native: Size, resize: Resize | None) -> Size | None:
+    """(H, W) after ``resize``: None = native; an int = the height (width keeps the aspect ratio,
+    rounded); a float = a scale factor for both sides (rounded); (H, W) = exactly that."""
+    H, W = native
+    if resize is None:
+        return None
+    if isinstance(resize, bool):
+        raise ValueError(f"resize: expected a height, a scale or (H, W), got {resize!r}")
+    if isinstance(resize, int):
+        size = (resize, round(W * resize / H))
+    elif isinstance(resize, float):
+        size = (round(H * resize), round(W * resize))
+    elif isinstance(resize, (tuple, list)) and len(resize) == 2:
+        size = (int(resize[0]), int(resize[1]))
+    else:
+        raise ValueError(f"resize: expected a height (int), a scale (float) or (H, W), got {resize!r}")
+    if min(size) < 1:
+        raise ValueError(f"resize {resize!r}: gives an empty {size[1]}x{size[0]} image from {W}x{H}")
+    return size
+
+
+def _wanted(count: int, max_frames: int | None) -> bool:
+    return max_frames is None or count < max_frames
+
+
+def _read_folder(folder: Path, stride: int, max_frames: int | None, resize: Resize | None):
+    files = list_files(folder, IMAGE_SUFFIXES)
+    if not files:
+        raise DatasetFormatError(f"{folder}: no image frames ({', '.join(IMAGE_SUFFIXES)}) in this folder")
+    indices = list(range(0, len(files), stride))[:max_frames]
+    native = tuple(read_image(files[0]).shape[1:])
+    frames, _ = read_images([files[t] for t in indices], output_size(native, resize))
+    extra = {"files": [files[t].name for t in indices]}
+    return frames, indices, native, len(files), None, extra
+
+
+def _read_file(path: Path, stride: int, max_frames: int | None, resize: Resize | None, count_all: bool):
+    capture = cv2.VideoCapture(os.fspath(path))
+    try:
+        if not capture.isOpened():
+            raise DatasetFormatError(f"{path}: unreadable video (OpenCV could not open it)")
+        fps = capture.get(cv2.CAP_PROP_FPS)
+        frames, indices, native, size, index = [], [], None, None, 0
+        while count_all or _wanted(len(frames), max_frames):
+            if not capture.grab():
+                break
+            if index % stride == 0 and _wanted(len(frames), max_frames):
+                ok, image = capture.retrieve()
+                if not ok or image is None:
+                    raise DatasetFormatError(f"{path}: frame {index} failed to decode")
+                if native is None:
+                    native = tuple(image.shape[:2])
+                    size = output_size(native, resize)
+                rgb = resize_array(cv2.cvtColor(image, cv2.COLOR_BGR2RGB), size)
+                frames.append(torch.from_numpy(np.ascontiguousarray(rgb)).permute(2, 0, 1))
+                indices.append(index)
+            index += 1
+    finally:
+        capture.release()
+    if not frames:
+        raise DatasetFormatError(f"{path}: no frame could be read (empty or undecodable video)")
+    total = index if count_all else None
+    return torch.stack(frames), indices, native, total, (fps if fps and fps > 0 else None), {}
+
+
+def _attach(scene: Scene, poses: PoseEstimates, where: str, total: int) -> Scene:
+    """Check ``poses`` against the video (counts, frames, somebody found) and apply them."""
+    fi = poses.frame_indices.tolist()
+    default = fi == list(range(len(fi)))
+    if (default and len(fi) != total) or fi[-1] >= total:
+        raise DatasetFormatError(
+            f"{where}: pose estimates for {len(fi)} frames (video frames {fi[0]}..{fi[-1]}), "
+            f"but the video has {total} frames"
+        )
+    missing = sorted(set(scene.metadata["frame_indices"]) - set(fi))
+    if missing:
+        more = " ..." * (len(missing) > 5)
+        raise DatasetFormatError(f"{where}: no pose estimates for video frames {missing[:5]}{more}")
+    scene = poses.apply_to(scene)  # no image_size: in native pixels (metadata["native_size"])
+    if scene.keypoints_conf is not None and poses.keypoints2d is not None and not (scene.keypoints_conf > 0).any():
+        raise DatasetFormatError(f"{where}: nobody is ever found in the pose estimates of the selected frames")
+    return scene
+
+
+def read_video(
+    path: str | os.PathLike,
+    *,
+    stride: int = 1,
+    max_frames: int | None = None,
+    resize: Resize | None = None,
+    poses: str | os.PathLike | PoseEstimates | None = None,
+    fps: float | None = None,
+) -> Scene:
+    """Read a video file (mp4, anything OpenCV reads) or a folder of frames (jpg/png/...,
+    natural name order) as a Scene: frames 0, stride, 2 stride, ... (at most ``max_frames``).
+
+    ``resize``: None, a height (int; the width keeps the aspect ratio), a scale (float) or
+    (H, W). ``poses``: a pose file of any kind :func:`~.estimates.read_estimates` reads, or
+    PoseEstimates, indexed by source frame (``frame_indices``; without ``image_size`` taken to
+    be in the video's native pixels); the kept frames' rows are selected and their pixels and
+    crops rescaled. ``fps``: the source's frame rate (default: the file's, 30 for folders); the
+    scene's fps is ``fps / stride``.
+
+    Raises FileNotFoundError (missing path), ValueError (bad arguments), DatasetFormatError
+    naming the file (unreadable video, empty folder, undecodable frame, pose estimates not
+    matching the video's frames, or nobody ever found in them).
+    """
+    if stride < 1:
+        raise ValueError(f"stride must be >= 1, got {stride}")
+    if max_frames is not None and max_frames < 1:
+        raise ValueError(f"max_frames must be >= 1 or None, got {max_frames}")
+    path = Path(path)
+    if path.is_dir():
+        frames, indices, native, total, file_fps, extra = _read_folder(path, stride, max_frames, resize)
+    elif path.is_file():
+        count_all = poses is not None  # to check the pose file's frame count
+        frames, indices, native, total, file_fps, extra = _read_file(path, stride, max_frames, resize, count_all)
+    else:
+        raise FileNotFoundError(f"{path}: no such video file or folder of frames")
+    source_fps = float(fps or file_fps or DEFAULT_FOLDER_FPS)
+    metadata = {"source": str(path), "frame_indices": indices, "native_size": list(native), "stride": stride,
+                "source_fps": source_fps, **extra}  # fmt: skip
+    scene = make_scene(path, frames=frames, fps=source_fps / stride, name=path.stem or path.name, metadata=metadata)
+    if poses is None:
+        return scene
+    where = str(poses) if not isinstance(poses, PoseEstimates) else f"{path} (pose estimates from {poses.source})"
+    if not isinstance(poses, PoseEstimates):
+        poses = read_estimates(poses)
+    return _attach(scene, poses, where, total)

@@ -1,0 +1,53 @@
+"""Pose estimation for any video: MediaPipe Pose (optional extra) -> :class:`PoseEstimates`.
+
+``estimate_poses(frames_or_path)`` gives COCO-17 2D keypoints, LSP-14 3D joints (mm) and
+weak-perspective cameras; ``lit-boot estimate-pose VIDEO --out poses.npz`` writes them.
+MediaPipe is imported only when an estimate is made (``pip install "lit-boot[mediapipe]"``);
+the conversions in :mod:`.world_to_lsp` and :mod:`.tracking` need no MediaPipe.
+"""
+
+from .mediapipe_pose import (
+    INSTALL_HINT,
+    MEDIAPIPE_VERSION,
+    MediaPipeUnavailable,
+    estimate_pose_file,
+    estimate_poses,
+    import_mediapipe,
+    mediapipe_available,
+    poses_from_landmarks,
+    run_mediapipe,
+    summary_line,
+)
+from .tracking import JUMP_POLICIES, drop_jumps, find_jumps
+from .world_to_lsp import (
+    HEAD_TOP_FACTOR,
+    fit_cameras,
+    landmark_confidence,
+    landmarks_to_coco17,
+    nearest_found,
+    square_crops,
+    world_to_lsp14,
+)
+
+__all__ = [
+    "INSTALL_HINT",
+    "MEDIAPIPE_VERSION",
+    "MediaPipeUnavailable",
+    "estimate_pose_file",
+    "estimate_poses",
+    "import_mediapipe",
+    "mediapipe_available",
+    "poses_from_landmarks",
+    "run_mediapipe",
+    "summary_line",
+    "JUMP_POLICIES",
+    "drop_jumps",
+    "find_jumps",
+    "HEAD_TOP_FACTOR",
+    "fit_cameras",
+    "landmark_confidence",
+    "landmarks_to_coco17",
+    "nearest_found",
+    "square_crops",
+    "world_to_lsp14",
+]
