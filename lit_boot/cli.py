@@ -10,6 +10,10 @@ Subcommands:
   ``runs/<scene>/<model>`` unless ``--trainer.default_root_dir`` says otherwise.
 - ``lit-boot bootstrap --config configs/bootstrap.yaml --data.scene DIR [--out RUN]`` runs the
   whole method (flow -> pose -> flow) on one scene; rerunning an interrupted run resumes it.
+- ``lit-boot import {sintel,3dpw,h36m,video} ... --out DIR`` reads a dataset scene or a video
+  (with a pose file, or MediaPipe poses) into a scene folder.
+- ``lit-boot bootstrap --config configs/bootstrap.yaml --data.video VIDEO [--data.poses FILE]``
+  bootstraps a video directly (MediaPipe poses when no pose file is given).
 - ``lit-boot estimate-pose VIDEO --out poses.npz`` runs MediaPipe Pose (the ``mediapipe``
   extra) on a video file or folder of frames and writes 2D keypoints, 3D joints and cameras.
 - ``lit-boot demo`` makes a synthetic scene, bootstraps it with the local RAFT weights, and
@@ -69,7 +73,13 @@ def _bootstrap_parser() -> ArgumentParser:
 
     parser = ArgumentParser(prog="lit-boot bootstrap", description="Bootstrap flow and pose on one scene.")
     parser.add_argument("--config", action=ActionConfigFile, help="YAML file with the options below")
-    parser.add_argument("--data.scene", type=Path, required=True, help="scene folder (never written)")
+    parser.add_argument("--data.scene", type=Path | None, default=None, help="scene folder (never written)")
+    parser.add_argument("--data.video", type=Path | None, default=None,
+                        help="or a video file / frame folder: poses from --data.poses, else MediaPipe Pose")  # fmt: skip
+    parser.add_argument("--data.poses", type=Path | None, default=None, help="pose file for --data.video")
+    parser.add_argument("--data.stride", type=int, default=1, help="--data.video: every N-th frame")
+    parser.add_argument("--data.resize", type=int | float | None, default=None,
+                        help="--data.video: a height in px (int) or a scale (float)")  # fmt: skip
     parser.add_argument("--out", type=Path | None, default=None, help="run folder (default runs/<scene>/bootstrap)")
     parser.add_argument("--overwrite", type=bool, default=False, help="delete an existing run folder first")
     parser.add_class_arguments(BootstrapConfig, nested_key=None, as_group=False)
@@ -85,7 +95,18 @@ def bootstrap(argv: list[str]) -> int:
     from .bootstrap import Bootstrap, BootstrapConfig
 
     args = _bootstrap_parser().parse_args(argv)
-    result = Bootstrap(args.data.scene, args.out, _config_from(args, BootstrapConfig), overwrite=args.overwrite).run()
+    data = args.data
+    if (data.scene is None) == (data.video is None):
+        raise CliError("give one of --data.scene DIR (a scene folder) or --data.video PATH (a video or frame folder)")
+    scene, out = data.scene, args.out
+    if data.video is not None:
+        from .data.readers import read_video
+        from .import_cli import with_poses
+
+        scene = read_video(data.video, stride=data.stride, resize=data.resize, poses=data.poses)
+        scene = with_poses(scene, None, estimate=data.poses is None)
+        out = out or Path("runs") / data.video.stem / "bootstrap"
+    result = Bootstrap(scene, out, _config_from(args, BootstrapConfig), overwrite=args.overwrite).run()
     print(result.table())
     print(f"wrote {result.run_dir}")
     return 0
@@ -172,6 +193,13 @@ class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
+def import_scene(argv: list[str]) -> int:
+    """``lit-boot import KIND ... --out DIR``: see :mod:`lit_boot.import_cli`."""
+    from .import_cli import import_scene as run
+
+    return run(argv)
+
+
 def lightning(argv: list[str]) -> int:
     """``lit-boot fit|validate|predict``: Lightning's CLI over lit-boot's modules and data."""
     from .lightning_cli import run_lightning_cli
@@ -180,8 +208,8 @@ def lightning(argv: list[str]) -> int:
     return 0
 
 
-COMMANDS = {"synth": synth, "bootstrap": bootstrap, "demo": demo, "estimate-pose": estimate_pose, "fit": lightning,
-            "validate": lightning, "predict": lightning}
+COMMANDS = {"synth": synth, "import": import_scene, "bootstrap": bootstrap, "demo": demo, "estimate-pose": estimate_pose,
+            "fit": lightning, "validate": lightning, "predict": lightning}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,62 @@
+"""``lit-boot import`` (datasets and videos into scene folders) and ``lit-boot bootstrap --data.video``."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import pytest
+import torch
+
+from lit_boot.cli import main
+from lit_boot.data import load_scene, read_flo
+from lit_boot.data.readers import PoseEstimates, save_poses
+
+HAVE_MEDIAPIPE = importlib.util.find_spec("mediapipe") is not None
+needs_mediapipe = pytest.mark.skipif(not HAVE_MEDIAPIPE, reason='needs the mediapipe extra: pip install -e ".[mediapipe]"')
+FOOTBALL = "data/videos/football_720p_10f"
+
+
+@pytest.mark.shared
+def test_import_sintel_writes_a_scene_folder_with_its_gt(shared, tmp_path, capsys):
+    root = shared / "data/sintel_samples"
+    assert main(["import", "sintel", str(root), "alley_1", "--first", "2", "--last", "3", "--out", str(tmp_path / "s")]) == 0
+    scene = load_scene(tmp_path / "s")
+    assert scene.frames.shape == (2, 3, 436, 1024)
+    torch.testing.assert_close(scene.gt.flow[0], read_flo(root / "training/flow/alley_1/frame_0002.flo"))
+    assert "wrote" in capsys.readouterr().out
+    code = main(["import", "sintel", str(root), "alley_1", "--out", str(tmp_path / "s")])
+    assert code == 2 and str(tmp_path / "s") in capsys.readouterr().err  # never overwritten silently
+
+
+@pytest.mark.shared
+def test_import_video_with_a_pose_file_selects_and_rescales_the_rows(shared, tmp_path):
+    T, H, W = 10, 720, 1280
+    kp = torch.rand(T, 17, 2) * torch.tensor([W - 1.0, H - 1.0])
+    poses = PoseEstimates(keypoints2d=kp, keypoints_conf=torch.ones(T, 17), image_size=(H, W), source="test")
+    save_poses(poses, tmp_path / "poses.npz")
+    args = ["import", "video", str(shared / FOOTBALL), "--stride", "3", "--resize", "0.25",
+            "--poses", str(tmp_path / "poses.npz"), "--out", str(tmp_path / "v")]  # fmt: skip
+    assert main(args) == 0
+    scene = load_scene(tmp_path / "v")
+    assert scene.frames.shape == (4, 3, 180, 320)  # frames 0, 3, 6, 9
+    # pixel centres at integers: x' = (x + 0.5) * 0.25 - 0.5
+    torch.testing.assert_close(scene.keypoints2d, (kp[[0, 3, 6, 9]] + 0.5) * 0.25 - 0.5, atol=1e-3, rtol=0)
+
+
+def test_bootstrap_needs_exactly_one_of_scene_and_video(tmp_path, capsys):
+    assert main(["bootstrap", "--out", str(tmp_path / "run")]) == 2
+    assert "--data.scene" in capsys.readouterr().err and not (tmp_path / "run").exists()
+
+
+@needs_mediapipe
+@pytest.mark.mediapipe
+@pytest.mark.shared
+def test_bootstrap_a_video_alone_estimates_poses_then_runs(shared, tmp_path, capsys):
+    args = ["bootstrap", "--data.video", str(shared / FOOTBALL), "--data.stride", "4", "--data.resize", "0.25",
+            "--out", str(tmp_path / "run"), "--flow.weights", str(shared / "checkpoints/raft-small.pth"),
+            "--flow.train_updates", "2", "--flow.predict_updates", "3", "--flow_epochs", "1", "--pose_steps", "10",
+            "--progress_bar", "false", "--video", "false"]  # fmt: skip
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "| agreement_px |" in out
+    assert (tmp_path / "run/poses.npz").is_file() and (tmp_path / "run/summary.json").is_file()
