@@ -18,7 +18,7 @@ import torch
 from .cameras import Cameras
 from .joints import get_layout
 
-__all__ = ["Scene", "GroundTruth", "SceneValidationError"]
+__all__ = ["Scene", "GroundTruth", "SceneValidationError", "check_estimates"]
 
 
 class SceneValidationError(ValueError):
@@ -49,6 +49,30 @@ def _check_cameras(name: str, cameras: Any, T: int) -> None:
     _check(f"{name}.params", cameras.params, (T, cameras.params.shape[1]), "float")
     if cameras.crops is not None:
         _check(f"{name}.crops", cameras.crops, (T, 3), "float")
+
+
+def check_estimates(owner: str, est: Any, T: int) -> None:
+    """Check the pose-estimate fields of ``est`` (a Scene or alike: joints3d, joints3d_layout,
+    cameras, keypoints2d, keypoints_conf, keypoints_layout) for T frames; errors name
+    ``owner.field``."""
+    for key in ("joints3d_layout", "keypoints_layout"):
+        try:
+            get_layout(getattr(est, key))
+        except ValueError as err:
+            raise SceneValidationError(f"{owner}.{key}: {err}") from None
+    if est.joints3d is not None:
+        J = get_layout(est.joints3d_layout).num_joints
+        _check(f"{owner}.joints3d", est.joints3d, (T, J, 3), "float")
+    if est.cameras is not None:
+        _check_cameras(f"{owner}.cameras", est.cameras, T)
+    if (est.keypoints2d is None) != (est.keypoints_conf is None):
+        raise SceneValidationError(f"{owner}.keypoints2d and {owner}.keypoints_conf: give both or neither")
+    if est.keypoints2d is not None:
+        K = get_layout(est.keypoints_layout).num_joints
+        _check(f"{owner}.keypoints2d", est.keypoints2d, (T, K, 2), "float")
+        _check(f"{owner}.keypoints_conf", est.keypoints_conf, (T, K), "float")
+        if (est.keypoints_conf < 0).any() or (est.keypoints_conf > 1).any():
+            raise SceneValidationError(f"{owner}.keypoints_conf: expected values in [0, 1]")
 
 
 @dataclass
@@ -141,24 +165,7 @@ class Scene:
             raise SceneValidationError("Scene.frames: expected at least one frame, got T=0")
         if not (isinstance(self.fps, (int, float)) and self.fps > 0):
             raise SceneValidationError(f"Scene.fps: expected a positive number, got {self.fps!r}")
-        for key in ("joints3d_layout", "keypoints_layout"):
-            try:
-                get_layout(getattr(self, key))
-            except ValueError as err:
-                raise SceneValidationError(f"Scene.{key}: {err}") from None
-        if self.joints3d is not None:
-            J = get_layout(self.joints3d_layout).num_joints
-            _check("Scene.joints3d", self.joints3d, (T, J, 3), "float")
-        if self.cameras is not None:
-            _check_cameras("Scene.cameras", self.cameras, T)
-        if (self.keypoints2d is None) != (self.keypoints_conf is None):
-            raise SceneValidationError("Scene.keypoints2d and Scene.keypoints_conf: give both or neither")
-        if self.keypoints2d is not None:
-            K = get_layout(self.keypoints_layout).num_joints
-            _check("Scene.keypoints2d", self.keypoints2d, (T, K, 2), "float")
-            _check("Scene.keypoints_conf", self.keypoints_conf, (T, K), "float")
-            if (self.keypoints_conf < 0).any() or (self.keypoints_conf > 1).any():
-                raise SceneValidationError("Scene.keypoints_conf: expected values in [0, 1]")
+        check_estimates("Scene", self, T)
         if self.gt is not None:
             if not isinstance(self.gt, GroundTruth):
                 raise SceneValidationError(f"Scene.gt: expected a GroundTruth, got {type(self.gt).__name__}")

@@ -35,7 +35,7 @@ import torch
 
 from ...core.cameras import Cameras
 from ...core.joints import get_layout
-from ...core.scene import Scene, SceneValidationError, _check
+from ...core.scene import Scene, SceneValidationError, check_estimates
 from ..atomic import atomic_write_bytes
 from ._common import DatasetFormatError, scale_factors, scale_points
 
@@ -89,29 +89,9 @@ class PoseEstimates:
         T = self.num_frames
         if T is None:
             raise SceneValidationError("PoseEstimates: give keypoints2d (with keypoints_conf) or joints3d, or both")
-        if (self.keypoints2d is None) != (self.keypoints_conf is None):
-            raise SceneValidationError("PoseEstimates.keypoints2d and .keypoints_conf: give both or neither")
-        for key in ("keypoints_layout", "joints3d_layout"):
-            try:
-                get_layout(getattr(self, key))
-            except ValueError as err:
-                raise SceneValidationError(f"PoseEstimates.{key}: {err}") from None
-        if self.keypoints2d is not None:
-            K = get_layout(self.keypoints_layout).num_joints
-            _check("PoseEstimates.keypoints2d", self.keypoints2d, (T, K, 2), "float")
-            _check("PoseEstimates.keypoints_conf", self.keypoints_conf, (T, K), "float")
-            if (self.keypoints_conf < 0).any() or (self.keypoints_conf > 1).any():
-                raise SceneValidationError("PoseEstimates.keypoints_conf: expected values in [0, 1]")
-        if self.joints3d is not None:
-            J = get_layout(self.joints3d_layout).num_joints
-            _check("PoseEstimates.joints3d", self.joints3d, (T, J, 3), "float")
-        if self.cameras is not None:
-            if self.joints3d is None:
-                raise SceneValidationError("PoseEstimates.cameras: cameras need joints3d")
-            if not isinstance(self.cameras, Cameras):
-                got = type(self.cameras).__name__
-                raise SceneValidationError(f"PoseEstimates.cameras: expected a lit_boot Cameras, got {got}")
-            _check("PoseEstimates.cameras.params", self.cameras.params, (T, self.cameras.params.shape[1]), "float")
+        if self.cameras is not None and self.joints3d is None:
+            raise SceneValidationError("PoseEstimates.cameras: cameras need joints3d")
+        check_estimates("PoseEstimates", self, T)
         fi = self.frame_indices
         if not isinstance(fi, torch.Tensor) or fi.dtype != torch.int64 or tuple(fi.shape) != (T,):
             got = f"{fi.dtype} {tuple(fi.shape)}" if isinstance(fi, torch.Tensor) else type(fi).__name__
