@@ -65,9 +65,10 @@ def main() -> None:
     if "sintel" in args.parts:
         size = tuple(int(v) for v in args.sintel_size.split(","))
         for name, first, last in SINTEL:
-            scene = read_sintel(SHARED / "data/sintel_samples", name, first=first, last=last, size=size)
-            poses = estimate_poses(scene)
-            scene = poses.apply_to(scene)
+            root = SHARED / "data/sintel_samples"
+            # MediaPipe on the full-size frames (it misses small people), poses rescaled to `size`
+            poses = estimate_poses(read_sintel(root, name, first=first, last=last))
+            scene = poses.apply_to(read_sintel(root, name, first=first, last=last, size=size))
             speed, result = run(scene, Path(args.out) / name, "2d", args, video=False)
             row = {"scene": name, "found": int(poses.found().sum()), "frames": scene.num_frames,
                    "before": gt_pair_epe(result.initial_flows, scene), "after": gt_pair_epe(result.flows, scene),
