@@ -125,7 +125,8 @@ def pinhole_cameras(intrinsics: np.ndarray, num_frames: int, sx: float = 1.0, sy
     return Cameras("pinhole", torch.tensor(row, dtype=torch.float32).repeat(num_frames, 1))
 
 
-def _to_tensor(image: np.ndarray) -> torch.Tensor:
+def hwc_to_tensor(image: np.ndarray) -> torch.Tensor:
+    """(H, W, 3) uint8 array -> (3, H, W) tensor."""
     return torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1).contiguous()
 
 
@@ -144,7 +145,7 @@ def resize_frames(frames: torch.Tensor, size: Size | None) -> torch.Tensor:
     """Resize uint8 (T, 3, H, W) frames to ``size`` = (height, width) (as :func:`resize_array`)."""
     if size is None or tuple(frames.shape[-2:]) == tuple(size):
         return frames
-    return torch.stack([_to_tensor(resize_array(f.permute(1, 2, 0).numpy(), size)) for f in frames])
+    return torch.stack([hwc_to_tensor(resize_array(f.permute(1, 2, 0).numpy(), size)) for f in frames])
 
 
 def read_images(paths: Sequence[Path], size: Size | None = None) -> tuple[torch.Tensor, tuple[int, int]]:
@@ -189,7 +190,7 @@ def read_video(
                 if not ok:
                     raise DatasetFormatError(f"{path}: could not decode frame {index}")
                 native = tuple(image.shape[:2])
-                frames.append(_to_tensor(resize_array(cv2.cvtColor(image, cv2.COLOR_BGR2RGB), size)))
+                frames.append(hwc_to_tensor(resize_array(cv2.cvtColor(image, cv2.COLOR_BGR2RGB), size)))
             index += 1
     finally:
         capture.release()

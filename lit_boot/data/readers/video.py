@@ -12,11 +12,10 @@ import os
 from pathlib import Path
 
 import cv2
-import numpy as np
 import torch
 
 from ...core.scene import Scene
-from ._common import DatasetFormatError, Size, make_scene, read_image, read_images, resize_array
+from ._common import DatasetFormatError, Size, hwc_to_tensor, make_scene, read_image, read_images, resize_array
 from .estimates import list_files, read_estimates
 from .pose_file import PoseEstimates
 
@@ -82,7 +81,7 @@ def _read_file(path: Path, stride: int, max_frames: int | None, resize: Resize |
                     native = tuple(image.shape[:2])
                     size = output_size(native, resize)
                 rgb = resize_array(cv2.cvtColor(image, cv2.COLOR_BGR2RGB), size)
-                frames.append(torch.from_numpy(np.ascontiguousarray(rgb)).permute(2, 0, 1))
+                frames.append(hwc_to_tensor(rgb))
                 indices.append(index)
             index += 1
     finally:
