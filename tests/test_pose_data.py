@@ -63,6 +63,18 @@ def test_wrong_count_wrong_size_and_missing_paths_name_what_was_expected(scene, 
         load_flows("gt", no_gt)
 
 
+def test_gt_flows_refused_where_a_pair_has_no_valid_gt(scene):
+    """A partial Sintel copy: a pair without its .flo has zero flow marked invalid everywhere;
+    the refiner must not take it for "no motion"."""
+    partial = make_scene(motion="jump", frames=4, height=40, width=56, seed=2)
+    partial.gt.flow_valid[1] = False
+    partial.gt.flow[1] = 0.0
+    with pytest.raises(FlowSourceError, match=r"no ground-truth flow for pair\(s\) 1->2"):
+        load_flows("gt", partial)
+    partial.gt.flow_valid[1, :5] = True  # some valid pixels: accepted
+    assert torch.equal(load_flows("gt", partial), partial.gt.flow)
+
+
 def test_pose_data_serves_one_epoch_of_step_indices(scene):
     data = PoseData(scene, "gt", steps=7)
     data.setup("fit")

@@ -3,7 +3,8 @@
 Sources: a folder of Middlebury files ``flow_000000.flo`` ... (one per pair t -> t+1, as
 :class:`lit_boot.flow.FlowWriter` writes them; other files are ignored), one ``.npz`` file with
 key ``flow`` (P, 2, H, W) and optionally ``index`` (P,) (the pair of each flow), ``"gt"`` for the
-scene's ground-truth flow (an oracle), or a tensor (or NumPy array) of flows.
+scene's ground-truth flow (an oracle; refused when some pair has no valid GT pixel at all), or a
+tensor (or NumPy array) of flows.
 """
 
 from __future__ import annotations
@@ -94,6 +95,21 @@ def _read_npz(path: Path, pairs: int, height: int, width: int) -> torch.Tensor:
     return _check_shape(flow, str(path), pairs, height, width)
 
 
+def _check_gt_pairs_valid(scene: Scene) -> None:
+    """A pair whose GT flow is valid nowhere (e.g. a partial Sintel copy without its .flo) holds
+    zeros, which the refiner would take for "no motion": refuse it."""
+    valid = scene.gt.flow_valid
+    if valid is None:
+        return
+    empty = [t for t in range(valid.shape[0]) if not bool(valid[t].any())]
+    if empty:
+        shown = ", ".join(f"{t}->{t + 1}" for t in empty[:5]) + (f" and {len(empty) - 5} more" if len(empty) > 5 else "")
+        raise FlowSourceError(
+            f"flows 'gt': scene {scene.name!r} has no ground-truth flow for pair(s) {shown} (flow_valid is False "
+            f"everywhere there); give flows from the flow stage (a folder or .npz) or a frame range with GT"
+        )
+
+
 def load_flows(source: str | os.PathLike | torch.Tensor | np.ndarray, scene: Scene) -> torch.Tensor:
     """The forward flows (T-1, 2, H, W) px for ``scene`` from ``source`` (see the module doc;
     an array is taken like a tensor).
@@ -116,6 +132,7 @@ def load_flows(source: str | os.PathLike | torch.Tensor | np.ndarray, scene: Sce
     if str(source) == "gt":
         if scene.gt is None or scene.gt.flow is None:
             raise FlowSourceError(f"flows 'gt': scene {scene.name!r} has no ground-truth flow")
+        _check_gt_pairs_valid(scene)
         return scene.gt.flow.float()
     path = Path(source)
     if path.is_dir():
