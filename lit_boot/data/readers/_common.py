@@ -9,7 +9,8 @@ resize by factors (sx, sy) maps x to (x + 0.5) * sx - 0.5. Readers never write a
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,8 @@ from ..visualize import read_png
 __all__ = ["DatasetFormatError"]
 
 Size = tuple[int, int]
+#: Image files read as frames (lower-case suffixes).
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 
 
 class DatasetFormatError(SceneFormatError):
@@ -165,33 +168,62 @@ def read_images(paths: Sequence[Path], size: Size | None = None) -> tuple[torch.
     return torch.stack(frames), native
 
 
-def read_video(
-    path: Path, indices: Sequence[int], size: Size | None = None
-) -> tuple[torch.Tensor, tuple[int, int]]:
-    """Frames ``indices`` (0-based, increasing) of a video file as uint8 (T, 3, H, W) RGB
-    resized to ``size``, and the native (height, width). Decoded with OpenCV (skipped frames
-    are grabbed, not decoded). DatasetFormatError when the file is unreadable or ends before
-    the last wanted frame."""
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"{path}: no such video file")
+@dataclass
+class DecodedVideo:
+    """Frames decoded from a video file: frames uint8 (T, 3, H, W) RGB (T may be 0), indices
+    (the 0-based source frame of each), native (H, W) before resizing (None if nothing was
+    decoded), seen (frames grabbed before stopping) and fps (the file's; None if unknown)."""
+
+    frames: torch.Tensor
+    indices: list[int]
+    native: Size | None
+    seen: int
+    fps: float | None
+
+
+def decode_video(
+    path: Path, keep: Callable[[int, int], bool | None], size: Size | Callable[[Size], Size | None] | None = None
+) -> DecodedVideo:
+    """Decode ``path`` with OpenCV. ``keep(index, kept)`` says for each source frame whether
+    to decode it (True), skip it (False; grabbed, not decoded) or stop reading (None); ``kept``
+    counts the frames decoded so far. ``size``: output (H, W), or a function of the native
+    (H, W) giving it. DatasetFormatError when the file is unreadable or a frame undecodable."""
     capture = cv2.VideoCapture(os.fspath(path))
     try:
         if not capture.isOpened():
             raise DatasetFormatError(f"{path}: unreadable video (OpenCV could not open it)")
-        wanted, frames, index = set(indices), [], 0
-        while index <= max(indices):
-            if not capture.grab():
-                raise DatasetFormatError(
-                    f"{path}: the video ends after {index} frames, but frame {max(indices)} is needed "
-                    f"(fewer video frames than annotated frames)"
-                )
-            if index in wanted:
+        fps = capture.get(cv2.CAP_PROP_FPS)
+        frames, indices, native, index = [], [], None, 0
+        while (wanted := keep(index, len(frames))) is not None and capture.grab():
+            if wanted:
                 ok, image = capture.retrieve()
-                if not ok:
-                    raise DatasetFormatError(f"{path}: could not decode frame {index}")
-                native = tuple(image.shape[:2])
+                if not ok or image is None:
+                    raise DatasetFormatError(f"{path}: frame {index} failed to decode")
+                if native is None:
+                    native = tuple(image.shape[:2])
+                    size = size(native) if callable(size) else size
                 frames.append(hwc_to_tensor(resize_array(cv2.cvtColor(image, cv2.COLOR_BGR2RGB), size)))
+                indices.append(index)
             index += 1
     finally:
         capture.release()
-    return torch.stack(frames), native
+    stacked = torch.stack(frames) if frames else torch.empty(0, 3, 0, 0, dtype=torch.uint8)
+    return DecodedVideo(stacked, indices, native, index, fps if fps and fps > 0 else None)
+
+
+def read_video_frames(
+    path: Path, indices: Sequence[int], size: Size | None = None
+) -> tuple[torch.Tensor, tuple[int, int]]:
+    """Frames ``indices`` (0-based, increasing) of a video file as uint8 (T, 3, H, W) RGB
+    resized to ``size``, and the native (height, width). DatasetFormatError when the file is
+    unreadable or ends before the last wanted frame."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: no such video file")
+    wanted, last = set(indices), max(indices)
+    video = decode_video(path, lambda index, kept: None if index > last else index in wanted, size)
+    if video.seen <= last:
+        raise DatasetFormatError(
+            f"{path}: the video ends after {video.seen} frames, but frame {last} is needed "
+            f"(fewer video frames than annotated frames)"
+        )
+    return video.frames, video.native

@@ -34,8 +34,8 @@ import torch
 
 from ...core.joints import map_joints
 from ...core.scene import GroundTruth, Scene
-from ._common import DatasetFormatError, Size, check_shape, make_scene, pinhole_cameras, read_images, read_video
-from ._common import scale_factors, scale_points, select_frames
+from ._common import IMAGE_SUFFIXES, DatasetFormatError, Size, check_shape, make_scene, pinhole_cameras, read_images
+from ._common import read_video_frames, scale_factors, scale_points, select_frames
 
 __all__ = [
     "H36M_CAMERAS",
@@ -58,7 +58,6 @@ H36M_FPS = 50.0
 H36M_CAMERA_IDS = ("54138969", "55011271", "58860488", "60457274")
 #: The 17 of the 32 mocap joints that VideoPose3D keeps, giving the h36m17 order.
 H36M_KEEP_JOINTS = (0, 1, 2, 3, 6, 7, 8, 12, 13, 14, 15, 17, 18, 19, 25, 26, 27)
-_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
 @dataclass(frozen=True)
@@ -165,8 +164,8 @@ def _frame_source(root: Path, subject: str, action: str, camera: str, video: str
 def _read_frames(source: Path, indices: list[int], size: Size | None) -> tuple[torch.Tensor, tuple[int, int]]:
     """Frames ``indices`` from a video file or a folder of images (sorted by name)."""
     if not source.is_dir():
-        return read_video(source, indices, size)
-    files = sorted(p for p in source.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
+        return read_video_frames(source, indices, size)
+    files = sorted(p for p in source.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     if len(files) <= indices[-1]:
         raise DatasetFormatError(f"{source}: holds {len(files)} images, but frame {indices[-1]} is needed")
     return read_images([files[i] for i in indices], size)

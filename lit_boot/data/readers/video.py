@@ -11,17 +11,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import cv2
-import torch
 
 from ...core.scene import Scene
-from ._common import DatasetFormatError, Size, hwc_to_tensor, make_scene, read_image, read_images, resize_array
+from ._common import IMAGE_SUFFIXES, DatasetFormatError, Size, decode_video, make_scene, read_image, read_images
 from .estimates import list_files, read_estimates
 from .pose_file import PoseEstimates
 
 __all__ = ["IMAGE_SUFFIXES", "DEFAULT_FOLDER_FPS", "output_size", "read_video"]
 
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 #: Frame rate assumed for a folder of frames when ``fps`` is not given.
 DEFAULT_FOLDER_FPS = 30.0
 Resize = int | float | tuple[int, int]
@@ -48,10 +45,6 @@ def output_size(native: Size, resize: Resize | None) -> Size | None:
     return size
 
 
-def _wanted(count: int, max_frames: int | None) -> bool:
-    return max_frames is None or count < max_frames
-
-
 def _read_folder(folder: Path, stride: int, max_frames: int | None, resize: Resize | None):
     files = list_files(folder, IMAGE_SUFFIXES)
     if not files:
@@ -64,32 +57,16 @@ def _read_folder(folder: Path, stride: int, max_frames: int | None, resize: Resi
 
 
 def _read_file(path: Path, stride: int, max_frames: int | None, resize: Resize | None, count_all: bool):
-    capture = cv2.VideoCapture(os.fspath(path))
-    try:
-        if not capture.isOpened():
-            raise DatasetFormatError(f"{path}: unreadable video (OpenCV could not open it)")
-        fps = capture.get(cv2.CAP_PROP_FPS)
-        frames, indices, native, size, index = [], [], None, None, 0
-        while count_all or _wanted(len(frames), max_frames):
-            if not capture.grab():
-                break
-            if index % stride == 0 and _wanted(len(frames), max_frames):
-                ok, image = capture.retrieve()
-                if not ok or image is None:
-                    raise DatasetFormatError(f"{path}: frame {index} failed to decode")
-                if native is None:
-                    native = tuple(image.shape[:2])
-                    size = output_size(native, resize)
-                rgb = resize_array(cv2.cvtColor(image, cv2.COLOR_BGR2RGB), size)
-                frames.append(hwc_to_tensor(rgb))
-                indices.append(index)
-            index += 1
-    finally:
-        capture.release()
-    if not frames:
+    def keep(index: int, kept: int) -> bool | None:
+        if max_frames is not None and kept >= max_frames:
+            return False if count_all else None  # go on only to count the frames
+        return index % stride == 0
+
+    video = decode_video(path, keep, lambda native: output_size(native, resize))
+    if not video.indices:
         raise DatasetFormatError(f"{path}: no frame could be read (empty or undecodable video)")
-    total = index if count_all else None
-    return torch.stack(frames), indices, native, total, (fps if fps and fps > 0 else None), {}
+    total = video.seen if count_all else None
+    return video.frames, video.indices, video.native, total, video.fps, {}
 
 
 def _attach(scene: Scene, poses: PoseEstimates, where: str, total: int) -> Scene:
