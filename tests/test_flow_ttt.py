@@ -146,3 +146,13 @@ def test_flow_writer_npz_and_overwrite_protection(scene, tmp_path):
         assert npz["index"].tolist() == list(range(scene.num_frames - 1))
     with pytest.raises(FileExistsError, match="pred"):
         t.predict(model, datamodule=SceneFlowData(scene, pose_source="gt"), return_predictions=False)
+
+
+def test_person_region_is_the_sketch_dilated_by_the_margin():
+    masks = torch.zeros(2, 20, 30, dtype=torch.bool)
+    masks[0, 10, 15] = True  # frame 1 has no sketch: no person region
+    region = FlowTTT(weights=None, crop_margin=3, **FAST).person_region(masks)
+    assert region.shape == masks.shape and region.dtype == torch.bool
+    assert region[0].sum() == 7 * 7 and region[0, 7:14, 12:19].all()
+    assert not region[1].any()
+    assert FlowTTT(weights=None, **FAST).person_region(masks, margin=1)[0].sum() == 9

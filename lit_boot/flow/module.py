@@ -17,6 +17,7 @@ from dataclasses import asdict
 import lightning as L
 import torch
 import torch.nn.functional as F
+from kornia.morphology import dilation
 
 from ..metrics import EndPointError, PointEndPointError
 from .raft import load_raft, predict_flow
@@ -245,7 +246,8 @@ class FlowTTT(L.LightningModule):
         """The sketch dilated by ``margin`` px (default: the crop margin, else 16) (B, H, W)
         bool: 'the person' without ground truth."""
         r = margin if margin is not None else (self.hparams.crop_margin or 16)
-        return F.max_pool2d(sketch_masks[:, None].float(), 2 * r + 1, stride=1, padding=r)[:, 0] > 0
+        square = torch.ones(2 * r + 1, 2 * r + 1, device=sketch_masks.device)
+        return dilation(sketch_masks[:, None].float(), square)[:, 0] > 0
 
     def on_validation_epoch_end(self) -> None:
         for name, metric in [("val/epe", self.val_epe), ("val/epe_person", self.val_epe_person),
