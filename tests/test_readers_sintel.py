@@ -18,7 +18,7 @@ from lit_boot.data.readers import (
     read_sintel,
 )
 from lit_boot.data.scene_io import SceneFormatError, load_scene, save_scene
-from lit_boot.data.visualize import read_png, write_png
+from lit_boot.data.visualize import read_png, scene_preview, write_png
 
 H, W = 16, 24
 
@@ -192,3 +192,16 @@ def test_shared_whole_sample_marks_pairs_without_gt(shared: Path) -> None:
     assert scene.metadata["frames"] == [1, 2, 3, 4] and scene.metadata["gt_pairs"] == [[2, 3]]
     assert scene.gt.flow_valid.flatten(1).any(1).tolist() == [False, True, False]
     assert torch.equal(scene.gt.flow[1], read_flo(root / "training" / "flow" / "alley_1" / "frame_0002.flo"))
+
+
+@pytest.mark.shared
+def test_shared_partial_sample_summary_and_preview_show_only_the_valid_gt(shared: Path) -> None:
+    scene = read_sintel(shared / "data" / "sintel_samples", "alley_1", size=(109, 256))
+    assert "GT on 1 of 3 pairs" in scene.summary()
+    no_gt, with_gt = scene_preview(scene, 0), scene_preview(scene, 1)
+    W = scene.width
+    grey = no_gt[:, :, W : 2 * W]
+    assert torch.equal(grey[0], grey[1]) and torch.equal(grey[1], grey[2])  # no GT: the frame in grey,
+    assert grey.float().std() > 10  # not the blank white of an all-zero flow
+    colour = with_gt[:, :, W : 2 * W].int()
+    assert (colour[0] - colour[1]).abs().max() > 20  # the GT pair: colour-coded flow

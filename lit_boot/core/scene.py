@@ -186,6 +186,11 @@ class Scene:
                     if getattr(self.gt, k) is not None]  # fmt: skip
             lines.append(f"  ground truth: {', '.join(have) if have else 'none'}")
             if self.gt.flow is not None:
-                mag = self.gt.flow.norm(dim=1)
-                lines.append(f"  GT flow magnitude: mean {mag.mean().item():.2f} px, max {mag.max().item():.2f} px")
+                valid = self.gt.flow_valid
+                mag = self.gt.flow.norm(dim=1) if valid is None else self.gt.flow.norm(dim=1)[valid]
+                pairs = "" if valid is None else f" (valid pixels; GT on {int(valid.flatten(1).any(1).sum())} of {len(valid)} pairs)"
+                if mag.numel():
+                    lines.append(f"  GT flow magnitude: mean {mag.mean().item():.2f} px, max {mag.max().item():.2f} px{pairs}")
+                else:
+                    lines.append("  GT flow: valid nowhere")
         return "\n".join(lines)

@@ -146,8 +146,8 @@ def read_png(path: str | os.PathLike) -> torch.Tensor:
 def scene_preview(scene: Scene, index: int = 0) -> torch.Tensor:
     """Three panels side by side, uint8 (3, H, 3W), for frame ``index``.
 
-    Left: the frame. Middle: the colour-coded GT flow from frame ``index`` to ``index + 1``,
-    or the frame in grey when there is none. Right: the frame with the 2D keypoints
+    Left: the frame. Middle: the colour-coded GT flow from frame ``index`` to ``index + 1``
+    (white where it is not valid), or the frame in grey when that pair has no valid GT flow. Right: the frame with the 2D keypoints
     (confidence > 0.5) in lime and, if present, the GT 2D joints in red.
     """
     T = scene.num_frames
@@ -156,8 +156,10 @@ def scene_preview(scene: Scene, index: int = 0) -> torch.Tensor:
     index %= T
     frame = scene.frames[index]
     gt = scene.gt
-    if gt is not None and gt.flow is not None and index < T - 1:
-        middle = flow_image(gt.flow[index]).to(frame.device)
+    valid = None if gt is None or gt.flow_valid is None or index >= T - 1 else gt.flow_valid[index]
+    if gt is not None and gt.flow is not None and index < T - 1 and (valid is None or valid.any()):
+        flow = gt.flow[index] if valid is None else gt.flow[index] * valid  # invalid pixels: white (no motion)
+        middle = flow_image(flow).to(frame.device)
     else:
         middle = rgb_to_grayscale(frame, num_output_channels=3)
     right = frame
