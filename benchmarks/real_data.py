@@ -3,7 +3,8 @@
 - Sintel samples where MediaPipe finds the person (alley_1, market_5, temple_3; final pass):
   2D-only bootstrapping (KeypointRefiner, 50 flow epochs by default); EPE of the pairs with GT,
   before (pretrained RAFT) and after. "all" = every valid pixel, occluded ones included (Sintel's
-  convention); "noc" = valid and not occluded (lit-boot's run metrics).
+  convention); "noc" = valid and not occluded (lit-boot's run metrics). keypoints_gt_pair.png in
+  each run folder shows MediaPipe's keypoints on the GT pair's first frame.
 - The basketball clip (no GT): the whole 3D method on its first frames; the flow-pose agreement
   (L_opt residual, px) before and after, and the overlay video in the run folder.
 
@@ -26,6 +27,7 @@ import torch
 from lit_boot.bootstrap import bootstrap
 from lit_boot.bootstrap.outputs import speed_summary
 from lit_boot.data.readers import read_sintel, read_video
+from lit_boot.data.visualize import scene_preview, write_png
 from lit_boot.estimate import estimate_poses
 from lit_boot.metrics import flow_errors
 
@@ -70,6 +72,9 @@ def main() -> None:
             poses = estimate_poses(read_sintel(root, name, first=first, last=last))
             scene = poses.apply_to(read_sintel(root, name, first=first, last=last, size=size))
             speed, result = run(scene, Path(args.out) / name, "2d", args, video=False)
+            # the detections on the GT pair's first frame, to judge them by eye (frame | GT flow | keypoints)
+            first_gt = scene.metadata["frames"].index(scene.metadata["gt_pairs"][0][0])
+            write_png(Path(args.out) / name / "keypoints_gt_pair.png", scene_preview(scene, first_gt))
             row = {"scene": name, "found": int(poses.found().sum()), "frames": scene.num_frames,
                    "before": gt_pair_epe(result.initial_flows, scene), "after": gt_pair_epe(result.flows, scene),
                    "agreement": [result.history[0]["agreement_px"], result.history[-1]["agreement_px"]], "speed": speed}  # fmt: skip
