@@ -156,3 +156,15 @@ def test_person_region_is_the_sketch_dilated_by_the_margin():
     assert region[0].sum() == 7 * 7 and region[0, 7:14, 12:19].all()
     assert not region[1].any()
     assert FlowTTT(weights=None, **FAST).person_region(masks, margin=1)[0].sum() == 9
+
+
+def test_nothing_painted_skips_training_and_keeps_the_flow(scene, tmp_path):
+    nobody = make_scene(motion="run", frames=3, height=64, width=96, seed=0)
+    nobody.keypoints_conf.zero_()  # e.g. a detector that found nobody in two consecutive frames
+    model = FlowTTT(weights=None, lr=1e-2, **FAST)
+    before = {k: v.clone() for k, v in model.raft.state_dict().items()}
+    fit = trainer(tmp_path, epochs=2)
+    with pytest.warns(UserWarning, match="nothing painted"):
+        fit.fit(model, datamodule=SceneFlowData(nobody, pose_source="keypoints2d"))
+    assert fit.global_step == 0 and model.target_report["target/painted_fraction"] == 0.0
+    assert all(torch.equal(before[k], v) for k, v in model.raft.state_dict().items())

@@ -18,6 +18,7 @@ import lightning as L
 import torch
 import torch.nn.functional as F
 from kornia.morphology import dilation
+from lightning.pytorch.utilities import rank_zero_warn
 
 from ..metrics import EndPointError, PointEndPointError
 from .raft import load_raft, predict_flow
@@ -144,6 +145,12 @@ class FlowTTT(L.LightningModule):
             self.target_report = self.build_targets(dm)
             for logger in self.loggers:
                 logger.log_metrics(self.target_report, step=0)
+            if not self.sketch_masks.any():  # the target is the base flow: nothing to learn
+                rank_zero_warn(
+                    "FlowTTT: nothing painted (no bone is confident in two consecutive frames); "
+                    "training skipped, the flow stays as it is"
+                )
+                self.trainer.should_stop = True
         if self.original is None and dm is not None and self.trainer.limit_val_batches:
             self.original = self._predict_all(dm.val_dataloader(), self.hparams.predict_updates)
 
