@@ -11,7 +11,12 @@ The public API:
 - the pose stage (``lit_boot.pose``): :class:`PoseRefiner` (3D joints and cameras) with
   :class:`PoseLossWeights`, :class:`KeypointRefiner` (2D-only) with
   :class:`KeypointLossWeights`, their data :class:`PoseData`, the one-call
-  :func:`refine_poses`, and its :class:`PoseResult` (read back by :func:`load_pose_result`).
+  :func:`refine_poses`, and its :class:`PoseResult` (read back by :func:`load_pose_result`);
+- the flow stage (``lit_boot.flow``): :class:`FlowTTT` with its :class:`SketchConfig`;
+- the whole method (``lit_boot.bootstrap``): :class:`Bootstrap` (``Bootstrap(scene, out).run()``),
+  :class:`BootstrapConfig` and :class:`BootstrapResult`;
+- real data (``lit_boot.data.readers``): :func:`read_video` (a video file or a folder of
+  frames), :func:`read_estimates` (pose files of several formats) and :class:`PoseEstimates`.
 """
 
 from .core import (
@@ -27,7 +32,10 @@ from .core import (
     get_layout,
     map_joints,
 )
+from .bootstrap import Bootstrap, BootstrapConfig, BootstrapResult
 from .data import load_scene, read_flo, save_scene, write_flo
+from .data.readers import PoseEstimates, read_estimates, read_video
+from .flow import FlowTTT, SketchConfig
 from .pose import (
     KeypointLossWeights,
     KeypointRefiner,
@@ -68,5 +76,13 @@ __all__ = [
     "PoseResult",
     "load_pose_result",
     "refine_poses",
+    "FlowTTT",
+    "SketchConfig",
+    "Bootstrap",
+    "BootstrapConfig",
+    "BootstrapResult",
+    "read_video",
+    "read_estimates",
+    "PoseEstimates",
     "__version__",
 ]

@@ -167,3 +167,18 @@ def test_cli_validate_prints_the_initial_estimates_errors(config, metric, scene,
     assert printed_metric(out, metric) == pytest.approx(model.evaluate()[metric], rel=1e-5)
     assert printed_metric(out, "loss/total") == pytest.approx(model.final_loss()["total"], rel=1e-4)
     assert not list(tmp_path.rglob("poses.json"))  # validation saves nothing
+
+
+def test_the_top_level_package_exports_the_flow_bootstrap_and_reader_api():
+    import lit_boot.bootstrap as bootstrap_pkg
+    import lit_boot.data.readers as readers
+    import lit_boot.flow as flow
+
+    homes = {flow: ("FlowTTT", "SketchConfig"), bootstrap_pkg: ("Bootstrap", "BootstrapConfig", "BootstrapResult"),
+             readers: ("read_video", "read_estimates", "PoseEstimates")}  # fmt: skip
+    for module, names in homes.items():
+        for name in names:
+            assert getattr(lit_boot, name) is getattr(module, name) and name in lit_boot.__all__
+    assert lit_boot.bootstrap is bootstrap_pkg  # the subpackage is not shadowed by a function
+    undocumented = [n for n in lit_boot.__all__ if n != "__version__" and not getattr(lit_boot, n).__doc__]
+    assert not undocumented
