@@ -9,7 +9,8 @@
   (L_opt residual, px) before and after, and the overlay video in the run folder.
 
 Usage:
-  python benchmarks/real_data.py [--parts sintel,basketball] [--sintel-size 218,512]
+  python benchmarks/real_data.py [--parts sintel,basketball] [--scenes alley_1,market_5,temple_3]
+      [--sintel-size 218,512] [--flow '{"sketch": {"max_disagreement_px": 3}}']
       [--epochs N (default: the mode's)] [--pose-steps 1500] [--basketball-frames 16]
       [--basketball-resize 270] [--weights ../shared/checkpoints/raft-small.pth]
       [--out /tmp/real_data] [--json out.json]
@@ -45,7 +46,8 @@ def gt_pair_epe(flows: torch.Tensor, scene) -> dict[str, float]:
 
 def run(scene, out: Path, mode: str, args, video: bool) -> tuple[dict, object]:
     shutil.rmtree(out, ignore_errors=True)
-    result = bootstrap(scene, out, mode=mode, flow={"weights": args.weights}, flow_epochs=args.epochs,
+    flow = {"weights": args.weights, **json.loads(args.flow)}
+    result = bootstrap(scene, out, mode=mode, flow=flow, flow_epochs=args.epochs,
                        pose_steps=args.pose_steps, progress_bar=False, video=video)  # fmt: skip
     return speed_summary(result), result
 
@@ -53,6 +55,8 @@ def run(scene, out: Path, mode: str, args, video: bool) -> tuple[dict, object]:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--parts", default="sintel,basketball")
+    p.add_argument("--scenes", default=",".join(name for name, _, _ in SINTEL), help="Sintel samples to run")
+    p.add_argument("--flow", default="{}", help='FlowTTT options over the preset\'s, JSON: {"sketch": {"max_disagreement_px": 3}}')
     p.add_argument("--sintel-size", default="218,512", help="H,W (the samples are 436,1024)")
     p.add_argument("--epochs", type=int, default=None, help="flow epochs per stage (default: 50 in 2D, 8 in 3D)")
     p.add_argument("--pose-steps", type=int, default=1500)
@@ -66,7 +70,7 @@ def main() -> None:
     rows = []
     if "sintel" in args.parts:
         size = tuple(int(v) for v in args.sintel_size.split(","))
-        for name, first, last in SINTEL:
+        for name, first, last in (s for s in SINTEL if s[0] in args.scenes.split(",")):
             root = SHARED / "data/sintel_samples"
             # MediaPipe on the full-size frames (it misses small people), poses rescaled to `size`
             poses = estimate_poses(read_sintel(root, name, first=first, last=last))
