@@ -245,3 +245,14 @@ def test_write_video_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> 
         write_video(grey_frames(2, 8, 8), tmp_path / "v.mp4", fps=5)
     assert tried == [cv2.VideoWriter_fourcc(*"mp4v"), cv2.VideoWriter_fourcc(*"avc1")]
     assert not any(tmp_path.iterdir())
+
+
+def test_panel_labels_are_white_on_a_solid_black_box() -> None:
+    grey = np.full((270, 480, 3), 200, np.uint8)
+    out = report._label(grey, "refined")
+    changed = np.nonzero((out != 200).any(2))
+    box = out[: changed[0].max() + 1, : changed[1].max() + 1]
+    assert 60 < box.shape[1] < 200 and 10 < box.shape[0] < 40  # top left, about the text's size
+    assert not (box == 200).all(2).any()  # no background shows through the label
+    assert (box == 0).all(2).mean() > 0.4 and (box.min(2) > 128).any()  # a black box with light text
+    assert (grey == 200).all()  # the input is not drawn on
