@@ -186,11 +186,14 @@ class Scene:
                     if getattr(self.gt, k) is not None]  # fmt: skip
             lines.append(f"  ground truth: {', '.join(have) if have else 'none'}")
             if self.gt.flow is not None:
-                valid = self.gt.flow_valid
-                mag = self.gt.flow.norm(dim=1) if valid is None else self.gt.flow.norm(dim=1)[valid]
-                pairs = "" if valid is None else f" (valid pixels; GT on {int(valid.flatten(1).any(1).sum())} of {len(valid)} pairs)"
+                valid, mag = self.gt.flow_valid, self.gt.flow.norm(dim=1)
+                pairs = ""
+                if valid is not None:
+                    mag = mag[valid]
+                    pairs = f" (valid pixels; GT on {int(valid.flatten(1).any(1).sum())} of {len(valid)} pairs)"
                 if mag.numel():
-                    lines.append(f"  GT flow magnitude: mean {mag.mean().item():.2f} px, max {mag.max().item():.2f} px{pairs}")
+                    stats = f"mean {mag.mean().item():.2f} px, max {mag.max().item():.2f} px"
+                    lines.append(f"  GT flow magnitude: {stats}{pairs}")
                 else:
                     lines.append("  GT flow: valid nowhere")
         return "\n".join(lines)

@@ -147,8 +147,9 @@ def scene_preview(scene: Scene, index: int = 0) -> torch.Tensor:
     """Three panels side by side, uint8 (3, H, 3W), for frame ``index``.
 
     Left: the frame. Middle: the colour-coded GT flow from frame ``index`` to ``index + 1``
-    (white where it is not valid), or the frame in grey when that pair has no valid GT flow. Right: the frame with the 2D keypoints
-    (confidence > 0.5) in lime and, if present, the GT 2D joints in red.
+    (white where it is not valid), or the frame in grey when that pair has no valid GT flow.
+    Right: the frame with the 2D keypoints (confidence > 0.5) in lime and, if present, the GT
+    2D joints in red.
     """
     T = scene.num_frames
     if not -T <= index < T:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-
 from ...core.scene import Scene
 from ._common import IMAGE_SUFFIXES, DatasetFormatError, Size, decode_video, make_scene, read_image, read_images
 from .estimates import list_files, read_estimates
