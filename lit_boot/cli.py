@@ -221,7 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0 if argv[:1] in ([], ["-h"], ["--help"]) else 2
     try:
         return COMMANDS[argv[0]](argv if COMMANDS[argv[0]] is lightning else argv[1:])
-    except (CliError, ValueError, FileExistsError, FileNotFoundError) as err:
+    except (CliError, ValueError, OSError) as err:
         print(f"lit-boot {argv[0]}: error: {err}", file=sys.stderr)
         return 2
 

@@ -3,6 +3,10 @@
 ``../shared`` beside the project root (or ``$LIT_BOOT_SHARED``) holds real RAFT weights,
 Sintel samples, CMU BVH files and videos. Tests that need it take the ``shared`` fixture: it
 skips when the folder is absent, and fails instead when ``LIT_BOOT_REQUIRE_SHARED=1`` (CI).
+
+No test sees the weights a user placed in ``checkpoints/`` (or ``./checkpoints``): the lookup's
+default folders are replaced by an empty one for every test, unless the test is marked
+``real_checkpoint_dirs``; a test that wants weights names them (``$LIT_BOOT_CHECKPOINTS`` or a path).
 """
 
 from __future__ import annotations
@@ -28,3 +32,13 @@ def shared() -> Path:
             pytest.fail(f"LIT_BOOT_REQUIRE_SHARED=1 but the shared folder {path} is missing")
         pytest.skip(f"needs ../shared: {path} is absent")
     return path
+
+
+@pytest.fixture(autouse=True)
+def no_user_checkpoints(request, tmp_path_factory, monkeypatch):
+    """Hide the project's and the working directory's checkpoints/ from the weights lookup."""
+    if request.node.get_closest_marker("real_checkpoint_dirs") is None:
+        from lit_boot.flow import weights
+
+        empty = tmp_path_factory.mktemp("no_user_checkpoints")
+        monkeypatch.setattr(weights, "_default_dirs", lambda: [empty])

@@ -10,7 +10,14 @@ import torch
 from torchvision.models.optical_flow import raft_large, raft_small
 
 from lit_boot.data import read_flo, read_png
-from lit_boot.flow import convert_original_state_dict, load_raft, predict_flow, prepare_pair, resolve_weights
+from lit_boot.flow import (
+    checkpoint_dirs,
+    convert_original_state_dict,
+    load_raft,
+    predict_flow,
+    prepare_pair,
+    resolve_weights,
+)
 from lit_boot.metrics import flow_errors
 
 
@@ -97,6 +104,22 @@ def test_lookup_order_and_offline_error(shared, tmp_path, monkeypatch):
     assert resolve_weights("raft_small", "C_T_V1") == local / "raft-small.pth"
     # An explicit path wins over the lookup.
     assert resolve_weights("raft_small", shared / "checkpoints" / "raft-small.pth").parent == shared / "checkpoints"
+
+
+@pytest.mark.real_checkpoint_dirs
+def test_default_lookup_folders(shared, tmp_path, monkeypatch):
+    # Without $LIT_BOOT_CHECKPOINTS: ./checkpoints of the working directory, then the project's.
+    monkeypatch.delenv("LIT_BOOT_CHECKPOINTS", raising=False)
+    monkeypatch.chdir(tmp_path)
+    project = tmp_path / "project_checkpoints"
+    project.mkdir()
+    monkeypatch.setattr("lit_boot.flow.weights._PROJECT_CHECKPOINTS", project)
+    assert checkpoint_dirs() == [tmp_path / "checkpoints", project]
+    (project / "raft-small.pth").symlink_to(shared / "checkpoints" / "raft-small.pth")
+    assert resolve_weights("raft_small", "C_T_V1") == project / "raft-small.pth"
+    (tmp_path / "checkpoints").mkdir()
+    (tmp_path / "checkpoints" / "raft-small.pth").symlink_to(shared / "checkpoints" / "raft-small.pth")
+    assert resolve_weights("raft_small", "C_T_V1") == tmp_path / "checkpoints" / "raft-small.pth"
 
 
 def test_bad_weights_give_clear_errors(tmp_path):

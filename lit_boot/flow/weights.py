@@ -118,12 +118,17 @@ def load_state_dict_file(path: str | Path, arch: str) -> dict[str, torch.Tensor]
     return state
 
 
+def _default_dirs() -> list[Path]:
+    """The folders searched after ``$LIT_BOOT_CHECKPOINTS``: ``./checkpoints``, then the project's."""
+    return [Path.cwd() / "checkpoints", _PROJECT_CHECKPOINTS]
+
+
 def checkpoint_dirs() -> list[Path]:
     """Local folders searched for weight files, in order."""
     dirs = []
     if os.environ.get("LIT_BOOT_CHECKPOINTS"):
         dirs.append(Path(os.environ["LIT_BOOT_CHECKPOINTS"]))
-    dirs += [Path.cwd() / "checkpoints", _PROJECT_CHECKPOINTS]
+    dirs += _default_dirs()
     seen: list[Path] = []
     for d in dirs:
         if d.resolve() not in [s.resolve() for s in seen]:
