@@ -30,23 +30,29 @@ def _mask(path: Path, rows: slice, cols: slice) -> torch.Tensor:
     return mask
 
 
+def write_sintel_tree(root: Path, scene: str = "walk", frames: int = 3) -> dict:
+    """<root>/training/{final,clean}/<scene>/frame_0001...png (``frames`` of them, H x W), GT for
+    1->2 only (the other pairs have none), and an empty final/run; also used by test_readme.py."""
+    gen = torch.Generator().manual_seed(0)
+    training = root / "training"
+    for sub in [f"{kind}/{scene}" for kind in ("final", "clean", "flow", "invalid", "occlusions")] + ["final/run"]:
+        (training / sub).mkdir(parents=True)
+    images = torch.randint(0, 256, (frames, 3, H, W), dtype=torch.uint8, generator=gen)
+    for i, frame in enumerate(images, start=1):
+        write_png(training / "final" / scene / f"frame_{i:04d}.png", frame)
+        write_png(training / "clean" / scene / f"frame_{i:04d}.png", 255 - frame)
+    flow = torch.randn(2, H, W, generator=gen) * 3
+    write_flo(training / "flow" / scene / "frame_0001.flo", flow)
+    invalid = _mask(training / "invalid" / scene / "frame_0001.png", slice(0, 4), slice(0, 6))
+    occluded = _mask(training / "occlusions" / scene / "frame_0001.png", slice(8, 16), slice(10, 24))
+    return {"root": root, "training": training, "frames": images, "flow": flow,
+            "invalid": invalid, "occluded": occluded}  # fmt: skip
+
+
 @pytest.fixture()
 def tree(tmp_path: Path) -> dict:
     """training/{final,clean}/walk/frame_0001..0003.png, GT for 1->2 only (2->3 is missing)."""
-    gen = torch.Generator().manual_seed(0)
-    training = tmp_path / "sintel" / "training"
-    for sub in ("final/walk", "clean/walk", "flow/walk", "invalid/walk", "occlusions/walk", "final/run"):
-        (training / sub).mkdir(parents=True)
-    frames = torch.randint(0, 256, (3, 3, H, W), dtype=torch.uint8, generator=gen)
-    for i, frame in enumerate(frames, start=1):
-        write_png(training / "final" / "walk" / f"frame_{i:04d}.png", frame)
-        write_png(training / "clean" / "walk" / f"frame_{i:04d}.png", 255 - frame)
-    flow = torch.randn(2, H, W, generator=gen) * 3
-    write_flo(training / "flow" / "walk" / "frame_0001.flo", flow)
-    invalid = _mask(training / "invalid" / "walk" / "frame_0001.png", slice(0, 4), slice(0, 6))
-    occluded = _mask(training / "occlusions" / "walk" / "frame_0001.png", slice(8, 16), slice(10, 24))
-    return {"root": tmp_path / "sintel", "training": training, "frames": frames, "flow": flow,
-            "invalid": invalid, "occluded": occluded}  # fmt: skip
+    return write_sintel_tree(tmp_path / "sintel")
 
 
 def test_round_trip_frames_flow_masks(tree: dict) -> None:
