@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import urllib.error
+from pathlib import Path
 
 import pytest
 import torch
@@ -169,3 +170,52 @@ def test_inputs_any_size_and_dtype():
     torch.testing.assert_close(f_uint8, f_float)
     with pytest.raises(ValueError, match="image1"):
         prepare_pair(torch.zeros(1, 13, 21), b)
+
+
+def test_known_sha256_table_agrees_with_readme_and_torchvision():
+    from torchvision.models.optical_flow import Raft_Large_Weights, Raft_Small_Weights
+
+    from lit_boot.flow.weights import KNOWN_SHA256
+
+    readme = (Path(__file__).resolve().parents[1] / "checkpoints" / "README.md").read_text()
+    torchvision = {Path(m.url).name for enum in (Raft_Small_Weights, Raft_Large_Weights) for m in enum}
+    assert set(re.findall(r"`(raft_(?:small|large)_\w+-[0-9a-f]{8}\.pth)`", readme)) == torchvision
+    assert {name: digits for name, digits in KNOWN_SHA256.items() if len(digits) == 8} == {
+        name: re.search(r"-([0-9a-f]{8})\.pth$", name).group(1) for name in torchvision
+    }
+    whole = dict(re.findall(r"^\| `([^`]+)` \| `([0-9a-f]{64})` \|$", readme, flags=re.M))
+    assert whole == {name: sha for name, sha in KNOWN_SHA256.items() if len(sha) == 64} and whole
+
+
+@pytest.mark.shared
+def test_known_weights_are_hash_checked_once(shared, tmp_path, monkeypatch):
+    import hashlib
+
+    from lit_boot.flow import weights
+
+    calls = []
+    real = hashlib.sha256
+    monkeypatch.setattr(hashlib, "sha256", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.setattr(weights, "_HASHES", {})
+    original = shared / "checkpoints" / "raft-small.pth"
+    load_raft("raft_small", original)
+    load_raft("raft_small", original)
+    assert len(calls) == 1  # hashed once per file per process
+    other = tmp_path / "other.pth"
+    torch.save(raft_small().state_dict(), other)
+    load_raft("raft_small", other)  # an unknown name is not checked
+    assert len(calls) == 1
+    found = weights.file_sha256(other)
+    known = [("raft-small.pth", "is c7d41b9cc884"), ("raft_small_C_T_V1-ad48884c.pth", "starts with ad48884c")]
+    for name, expected in known:
+        (tmp_path / name).symlink_to(other)  # a known name, other bytes
+        message = rf"{name}: sha256 {found}, but the sha256 of {name} {expected}"
+        with pytest.raises(weights.WeightsHashError, match=message):
+            load_raft("raft_small", tmp_path / name)
+    copy = tmp_path / "copy" / "raft-small.pth"
+    copy.parent.mkdir()
+    copy.write_bytes(original.read_bytes())
+    load_raft("raft_small", copy)  # a faithful copy passes
+    copy.write_bytes(original.read_bytes()[:-1000] + bytes(1000))  # changed in place: hashed again
+    with pytest.raises(weights.WeightsHashError, match="copy/raft-small.pth"):
+        load_raft("raft_small", copy)

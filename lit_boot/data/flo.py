@@ -3,7 +3,8 @@
 Layout, all little-endian: float32 magic 202021.25 (the bytes ``PIEH``), int32 width,
 int32 height, then height x width pairs (u, v) of float32, row-major. u is the horizontal
 (x, right) and v the vertical (y, down) displacement in pixels. Unknown flow is often stored
-as values around 1e9; it is read back as is.
+as values around 1e9; it is read back as is. NaN or infinite values are not part of the format:
+:func:`read_flo` refuses them unless asked (``allow_nonfinite=True``).
 """
 
 from __future__ import annotations
@@ -16,43 +17,54 @@ import torch
 
 from .atomic import atomic_write_bytes
 
-__all__ = ["FLO_MAGIC", "read_flo", "write_flo"]
+__all__ = ["FLO_MAGIC", "FloFormatError", "read_flo", "write_flo"]
 
 FLO_MAGIC = 202021.25
 _HEADER_BYTES = 12
 _MAX_SIDE = 100_000  # larger sides mean a corrupted header
 
 
-def read_flo(path: str | os.PathLike) -> torch.Tensor:
+class FloFormatError(ValueError):
+    """A ``.flo`` file is foreign, truncated, oversized or holds NaN / inf (the message names it)."""
+
+
+def read_flo(path: str | os.PathLike, *, allow_nonfinite: bool = False) -> torch.Tensor:
     """Read a ``.flo`` file into a (2, H, W) float32 tensor: channel 0 = u (x), 1 = v (y), px.
 
-    Raises FileNotFoundError for a missing file and ValueError, naming the file, for a foreign
-    file (wrong magic), an impossible size or a truncated / oversized payload.
+    Raises FileNotFoundError for a missing file and :class:`FloFormatError` (a ValueError),
+    naming the file, for a foreign file (wrong magic), an impossible size, a truncated /
+    oversized payload or, unless ``allow_nonfinite``, NaN or infinite values.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such .flo file")
     data = path.read_bytes()
     if len(data) < _HEADER_BYTES:
-        raise ValueError(
+        raise FloFormatError(
             f"{path}: not a Middlebury .flo file: {len(data)} bytes, shorter than the {_HEADER_BYTES}-byte header"
         )
     magic = float(np.frombuffer(data, dtype="<f4", count=1)[0])
     if magic != FLO_MAGIC:
-        raise ValueError(
+        raise FloFormatError(
             f"{path}: not a Middlebury .flo file: magic {magic!r} (bytes {data[:4]!r}), expected {FLO_MAGIC}"
         )
     width, height = (int(v) for v in np.frombuffer(data, dtype="<i4", count=2, offset=4))
     if not (0 < width <= _MAX_SIDE and 0 < height <= _MAX_SIDE):
-        raise ValueError(f"{path}: corrupted .flo header: width {width}, height {height} (expected 1..{_MAX_SIDE})")
+        raise FloFormatError(f"{path}: corrupted .flo header: width {width}, height {height} (expected 1..{_MAX_SIDE})")
     expected = _HEADER_BYTES + 8 * width * height
     if len(data) != expected:
         what = "truncated" if len(data) < expected else "has trailing bytes"
-        raise ValueError(
+        raise FloFormatError(
             f"{path}: .flo file {what}: expected {expected} bytes for {width}x{height} flow, found {len(data)}"
         )
     uv = np.frombuffer(data, dtype="<f4", offset=_HEADER_BYTES).reshape(height, width, 2)
-    return torch.from_numpy(np.ascontiguousarray(uv.transpose(2, 0, 1), dtype=np.float32))
+    bad = int(np.count_nonzero(~np.isfinite(uv).all(-1)))
+    if bad and not allow_nonfinite:
+        raise FloFormatError(
+            f"{path}: .flo file holds NaN or infinite flow at {bad} of {width * height} pixels "
+            "(corrupted; expected finite displacements in px)"
+        )
+    return torch.from_numpy(np.array(uv.transpose(2, 0, 1), dtype=np.float32, order="C"))  # a writable copy
 
 
 def write_flo(path: str | os.PathLike, flow: torch.Tensor | np.ndarray) -> Path:

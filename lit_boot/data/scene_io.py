@@ -13,6 +13,7 @@ gt_cameras_params, gt_cameras_crops, gt_person_mask. Dtypes are kept exactly.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import zipfile
@@ -25,6 +26,7 @@ import torch
 from ..core.cameras import Cameras
 from ..core.scene import GroundTruth, Scene, SceneValidationError
 from .atomic import atomic_directory, atomic_write_bytes
+from .memory import check_memory
 from .visualize import read_png, write_png
 
 __all__ = ["SCENE_FORMAT", "SCENE_FORMAT_VERSION", "SceneFormatError", "load_scene", "save_scene"]
@@ -95,6 +97,8 @@ def save_scene(scene: Scene, path: str | os.PathLike, *, overwrite: bool = False
     load back identical from JSON). The folder is built beside ``path`` and renamed in at the
     end. An existing non-empty ``path`` raises FileExistsError unless ``overwrite`` is True
     and it is itself a saved scene (holds a scene.json); it is then swapped out atomically.
+    Any other OSError (read-only folder, disk full) removes the partial copy and is raised
+    again, of the same type, with a message naming ``path`` and the cause.
     """
     scene.validate()
     path = Path(path)
@@ -115,16 +119,37 @@ def save_scene(scene: Scene, path: str | os.PathLike, *, overwrite: bool = False
         "fields": {key: str(value.dtype) for key, value in arrays.items()},
         "metadata": _checked_metadata(scene.metadata),
     }
-    with atomic_directory(path, overwrite=overwrite, may_replace=_is_saved_scene, replaceable="a saved scene") as tmp:
-        (tmp / "frames").mkdir()
-        for t, frame in enumerate(scene.frames):
-            write_png(tmp / "frames" / _frame_name(t), frame)
-        with open(tmp / "arrays.npz", "wb") as f:
-            np.savez(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        atomic_write_bytes(tmp / "scene.json", json.dumps(meta, indent=2).encode("utf-8"))
+    try:
+        with atomic_directory(path, overwrite=overwrite, may_replace=_is_saved_scene, replaceable="a saved scene") as t:
+            _write_folder(t, scene.frames, arrays, meta)
+    except FileExistsError:
+        raise
+    except OSError as err:
+        size = scene.frames.numel() + sum(a.nbytes for a in arrays.values())
+        raise _write_error(path, err, size) from None
     return path
+
+
+def _write_folder(tmp: Path, frames: torch.Tensor, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+    (tmp / "frames").mkdir()
+    for t, frame in enumerate(frames):
+        write_png(tmp / "frames" / _frame_name(t), frame)
+    with open(tmp / "arrays.npz", "wb") as f:
+        np.savez(f, **arrays)
+        f.flush()
+        os.fsync(f.fileno())
+    atomic_write_bytes(tmp / "scene.json", json.dumps(meta, indent=2).encode("utf-8"))
+
+
+def _write_error(path: Path, err: OSError, size: int) -> OSError:
+    """The same kind of OSError, saying what failed where, that nothing was left behind, and
+    (disk full) how much room the scene needs."""
+    reason = err.strerror or str(err)
+    if err.errno == errno.ENOSPC:
+        reason = f"no space left on the device; the scene needs up to {size / 2**20:.1f} MiB"
+    where = f" (writing {err.filename})" if err.filename else ""
+    message = f"{path}: could not save the scene: {reason}{where}; nothing was saved and the partial copy was removed"
+    return type(err)(err.errno, message) if err.errno is not None else type(err)(message)
 
 
 def _read_meta(path: Path) -> dict[str, Any]:
@@ -168,6 +193,7 @@ def _read_frames(path: Path, meta: dict[str, Any]) -> torch.Tensor:
         raise SceneFormatError(f"{path}: scene.json says num_frames={T} but {folder} holds {len(found)} PNG files")
     if found != expected:
         raise SceneFormatError(f"{folder}: expected frames {expected[0]} .. {expected[-1]}, found {found[:3]} ...")
+    check_memory(path, T, H, W, advice="import it again with")
     frames = []
     for name in expected:
         try:
@@ -189,8 +215,8 @@ def _read_arrays(path: Path, fields: dict[str, str]) -> dict[str, torch.Tensor]:
     try:
         with np.load(file, allow_pickle=False) as npz:
             arrays = {key: npz[key] for key in fields if key in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile) as err:
-        raise SceneFormatError(f"{file}: unreadable .npz: {err}") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise SceneFormatError(f"{file}: unreadable .npz: {err or type(err).__name__}") from None
     missing = sorted(set(fields) - set(arrays))
     if missing:
         raise SceneFormatError(f"{file}: lacks keys {missing} that scene.json marks present")
@@ -212,8 +238,10 @@ def load_scene(path: str | os.PathLike) -> Scene:
     """Load a scene saved by :func:`save_scene`: identical tensors (bit-exact, same dtypes, on
     the CPU), layouts, cameras and metadata. Reads only; writes nothing into the folder.
 
-    Raises FileNotFoundError (missing folder or scene.json) and :class:`SceneFormatError`
-    (a ValueError) naming the file for anything malformed or inconsistent.
+    Raises FileNotFoundError (missing folder or scene.json), :class:`SceneFormatError`
+    (a ValueError) naming the file for anything malformed or inconsistent, and, before reading
+    the frames, :class:`~lit_boot.data.memory.NotEnoughMemoryError` when the scene would not
+    fit in the available memory.
     """
     path = Path(path)
     if not path.is_dir():

@@ -8,11 +8,14 @@ Lookup order for :func:`resolve_weights`:
 3. torchvision's download of a weights name (``C_T_V1`` ...) into the first checkpoint folder,
    with its hash check.
 
-Offline with nothing local, the error names the file to place and where.
+Offline with nothing local, the error names the file to place and where. A file whose name is
+in :data:`KNOWN_SHA256` is checked against that hash before it is loaded (once per file, size
+and mtime per process); a mismatch raises :class:`WeightsHashError`.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 from pathlib import Path
@@ -24,6 +27,10 @@ __all__ = [
     "ARCHS",
     "WEIGHT_ENUMS",
     "ORIGINAL_FILES",
+    "KNOWN_SHA256",
+    "WeightsHashError",
+    "check_known_hash",
+    "file_sha256",
     "checkpoint_dirs",
     "convert_original_state_dict",
     "load_state_dict_file",
@@ -38,6 +45,21 @@ ORIGINAL_FILES = {
     ("raft_large", "C_T_V1"): "raft-things.pth",
     ("raft_large", "C_T_SKHT_V1"): "raft-sintel.pth",
     ("raft_large", "C_T_SKHT_K_V1"): "raft-kitti.pth",
+}
+
+#: The sha256 of known weight files by file name: torchvision's carry the start of theirs in the
+#: name (8 hex digits, all that is known here), the original files' is given whole.
+#: checkpoints/README.md lists the same (a test compares them).
+KNOWN_SHA256 = {
+    "raft_small_C_T_V1-ad48884c.pth": "ad48884c",
+    "raft_small_C_T_V2-01064c6d.pth": "01064c6d",
+    "raft_large_C_T_V1-22a6c225.pth": "22a6c225",
+    "raft_large_C_T_V2-1bb1363a.pth": "1bb1363a",
+    "raft_large_C_T_SKHT_V1-0b8c9e55.pth": "0b8c9e55",
+    "raft_large_C_T_SKHT_V2-ff5fadd5.pth": "ff5fadd5",
+    "raft_large_C_T_SKHT_K_V1-4a6a5039.pth": "4a6a5039",
+    "raft_large_C_T_SKHT_K_V2-b5c70766.pth": "b5c70766",
+    "raft-small.pth": "c7d41b9cc88442bb8aa911dbb33086dac55a226394b142937ff22d5578717332",
 }
 
 _PROJECT_CHECKPOINTS = Path(__file__).resolve().parents[2] / "checkpoints"
@@ -89,10 +111,50 @@ def convert_original_state_dict(state: dict[str, torch.Tensor]) -> dict[str, tor
     return out
 
 
+class WeightsHashError(ValueError):
+    """A weights file under a known name does not have that file's sha256."""
+
+
+_HASHES: dict[tuple[str, int, int], str] = {}
+
+
+def file_sha256(path: str | Path) -> str:
+    """The sha256 (hex) of a file, computed once per process for each (path, size, mtime)."""
+    path = Path(path)
+    info = path.stat()
+    key = (str(path.resolve()), info.st_size, info.st_mtime_ns)
+    if key not in _HASHES:
+        digest = hashlib.sha256()
+        with open(path, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                digest.update(chunk)
+        _HASHES[key] = digest.hexdigest()
+    return _HASHES[key]
+
+
+def check_known_hash(path: str | Path) -> None:
+    """Raise :class:`WeightsHashError` when ``path``'s name is in :data:`KNOWN_SHA256` and its
+    sha256 differs (torchvision's names: does not start with the 8 digits). Other names pass."""
+    path = Path(path)
+    expected = KNOWN_SHA256.get(path.name)
+    if expected is None:
+        return
+    found = file_sha256(path)
+    if not found.startswith(expected):
+        what = "starts with" if len(expected) < 64 else "is"
+        raise WeightsHashError(
+            f"{path}: sha256 {found}, but the sha256 of {path.name} {what} {expected} (checkpoints/README.md): a "
+            "corrupted or different file under a known name; download it again, or rename your own weights"
+        )
+
+
 def load_state_dict_file(path: str | Path, arch: str) -> dict[str, torch.Tensor]:
     """Read a RAFT weights file in torchvision's or the original format; returns torchvision
-    names. A file of neither format raises ``ValueError`` saying what was found."""
+    names. A file of neither format raises ``ValueError`` saying what was found; a known file
+    name with other bytes raises :class:`WeightsHashError` (a ValueError)."""
     path = Path(path)
+    if path.is_file():
+        check_known_hash(path)
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except FileNotFoundError:

@@ -25,6 +25,10 @@ from ..visualize import read_png
 
 __all__ = ["DatasetFormatError"]
 
+# FFmpeg's own log lines ("moov atom not found" ...) would come on top of our one-line errors;
+# OpenCV reads this when it first opens a video. Set it to e.g. 24 to see FFmpeg's warnings.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+
 Size = tuple[int, int]
 #: Image files read as frames (lower-case suffixes).
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
@@ -209,6 +213,20 @@ def decode_video(
         capture.release()
     stacked = torch.stack(frames) if frames else torch.empty(0, 3, 0, 0, dtype=torch.uint8)
     return DecodedVideo(stacked, indices, native, index, fps if fps and fps > 0 else None)
+
+
+def probe_video(path: Path) -> tuple[int, Size] | None:
+    """(frame count, native (H, W)) from a video file's header; None when OpenCV cannot open
+    it or does not know them (the count of some streams is unknown until decoded)."""
+    capture = cv2.VideoCapture(os.fspath(path))
+    try:
+        if not capture.isOpened():
+            return None
+        count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        size = (int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT)), int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)))
+    finally:
+        capture.release()
+    return (count, size) if count > 0 and min(size) > 0 else None
 
 
 def read_video_frames(

@@ -28,6 +28,7 @@ import json
 import os
 import pickle
 import re
+import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
@@ -334,7 +335,7 @@ def read_estimates(path: str | os.PathLike, *, kind: str | None = None, **option
     if kind is None:
         try:
             kind = _detect(path)
-        except (OSError, ValueError) as err:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
             raise DatasetFormatError(f"{path}: unreadable pose file: {err}") from None
         if kind == "?":
             raise DatasetFormatError(

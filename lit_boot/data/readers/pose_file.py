@@ -146,12 +146,14 @@ class PoseEstimates:
         (if None: ``scene.metadata["native_size"]``, which :func:`~.video.read_video` records,
         else the scene's size) differs from the scene's. ``metadata["pose_estimates"]`` lists the
         estimates applied so far (source, fields, frame_indices, metadata). Raises
-        SceneValidationError on a mismatch.
+        SceneValidationError on a mismatch, or for a found keypoint (confidence > 0) more than
+        one image size outside the frame (x outside [-W, 2W], y outside [-H, 2H]).
         """
         est = self.take(self._rows_for(scene))
         if est.image_size is None and scene.metadata.get("native_size"):
             est = dataclasses.replace(est, image_size=tuple(scene.metadata["native_size"]))
         est = est.rescaled((scene.height, scene.width))
+        _check_in_image(est, scene.height, scene.width)
         fields: dict[str, Any] = {}
         if est.keypoints2d is not None:
             fields |= {"keypoints2d": est.keypoints2d, "keypoints_conf": est.keypoints_conf,
@@ -175,6 +177,24 @@ class PoseEstimates:
             f"PoseEstimates ({self.source}): {len(mine)} rows for video frames {_span(mine)} do not cover the "
             f"scene {scene.name!r}'s {T} frames" + (f" (video frames {_span(wanted)})" if wanted is not None else "")
         )
+
+
+def _check_in_image(est: PoseEstimates, height: int, width: int) -> None:
+    """SceneValidationError for found keypoints more than one image size outside the frame."""
+    if est.keypoints2d is None:
+        return
+    x, y = est.keypoints2d[..., 0], est.keypoints2d[..., 1]
+    far = (est.keypoints_conf > 0) & ((x < -width) | (x > 2 * width) | (y < -height) | (y > 2 * height))
+    if not far.any():
+        return
+    t, k = (int(i) for i in far.nonzero()[0])
+    name = get_layout(est.keypoints_layout).names[k]
+    raise SceneValidationError(
+        f"PoseEstimates ({est.source}).keypoints2d: {int(far.sum())} found keypoints in {int(far.any(1).sum())} "
+        f"frames lie more than one image size outside the {width}x{height} px frames, first {name} of video frame "
+        f"{int(est.frame_indices[t])} at ({float(x[t, k]):.0f}, {float(y[t, k]):.0f}) px (expected x in "
+        f"[{-width}, {2 * width}], y in [{-height}, {2 * height}]; wrong image_size or units?)"
+    )
 
 
 def _span(values: list[int]) -> str:
@@ -257,8 +277,11 @@ def _read_raw(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
             arrays = {k: npz[k] for k in npz.files}
         if "header" not in arrays:
             raise DatasetFormatError(f"{path}: not a {POSES_FORMAT!r} file (no 'header' key; keys {sorted(arrays)})")
-        return json.loads(str(arrays.pop("header"))), arrays
-    except (UnicodeDecodeError, json.JSONDecodeError, OSError, ValueError, zipfile.BadZipFile) as err:
+        header = json.loads(str(arrays.pop("header")))
+        if not isinstance(header, dict):
+            raise DatasetFormatError(f"{path}: not a {POSES_FORMAT!r} file (its header is a {type(header).__name__})")
+        return header, arrays
+    except (UnicodeDecodeError, json.JSONDecodeError, OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
         if isinstance(err, DatasetFormatError):
             raise
         raise DatasetFormatError(f"{path}: unreadable pose file: {err}") from None
@@ -293,6 +316,6 @@ def load_poses(path: str | os.PathLike) -> PoseEstimates:
             image_size=header.get("image_size"), source=header.get("source", "unknown"),
             metadata=header.get("metadata", {}),
         )  # fmt: skip
-    except (KeyError, TypeError, ValueError) as err:
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
         raise DatasetFormatError(f"{path}: malformed pose file: {type(err).__name__}: {err}") from None
 

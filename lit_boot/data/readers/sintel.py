@@ -10,7 +10,8 @@ The official training layout under ``root``::
 Partial copies work: a pair whose .flo is missing gets flow 0 and ``flow_valid`` False on
 every pixel, so it counts in no flow metric; ``metadata["gt_pairs"]`` lists the pairs with
 GT. A pair with a .flo but no occlusion / invalid mask counts every pixel as visible / valid
-(listed in ``metadata["missing_masks"]``). Sintel has no poses: the scene has none.
+(listed in ``metadata["missing_masks"]``). NaN / inf or unknown (>= 1e9) flow pixels are invalid; a
+.flo with no finite value at all is refused as corrupted. Sintel has no poses: the scene has none.
 """
 
 from __future__ import annotations
@@ -92,9 +93,11 @@ def _pair_gt(
     if not file.is_file():
         return None
     try:
-        flow = read_flo(file)
+        flow = read_flo(file, allow_nonfinite=True)  # a few NaN pixels: invalid there
     except ValueError as err:
         raise DatasetFormatError(str(err)) from None
+    if not torch.isfinite(flow).any():
+        raise DatasetFormatError(f"{file}: corrupted: every value is NaN or infinite (expected flow in px)")
     if tuple(flow.shape[1:]) != (height, width):
         raise DatasetFormatError(f"{file}: flow of {flow.shape[2]}x{flow.shape[1]} px, expected {width}x{height}")
     bad = ~torch.isfinite(flow).all(0) | (flow.abs() >= _BAD_FLOW).any(0)

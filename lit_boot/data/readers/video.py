@@ -11,8 +11,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ...core.scene import Scene
-from ._common import IMAGE_SUFFIXES, DatasetFormatError, Size, decode_video, make_scene, read_image, read_images
+from ...core.scene import Scene, SceneValidationError
+from ..memory import check_memory
+from ._common import IMAGE_SUFFIXES, DatasetFormatError, Size, decode_video, make_scene, probe_video, read_image
+from ._common import read_images
 from .estimates import list_files, read_estimates
 from .pose_file import PoseEstimates
 
@@ -44,12 +46,20 @@ def output_size(native: Size, resize: Resize | None) -> Size | None:
     return size
 
 
+def _check_memory(path: Path, total: int, native: Size, stride: int, max_frames: int | None, resize) -> None:
+    """Refuse, before decoding, a selection of frames that would not fit in memory."""
+    T = len(range(0, total, stride)[:max_frames])
+    H, W = output_size(native, resize) or native
+    check_memory(path, T, H, W, advice="read fewer or smaller frames:")
+
+
 def _read_folder(folder: Path, stride: int, max_frames: int | None, resize: Resize | None):
     files = list_files(folder, IMAGE_SUFFIXES)
     if not files:
         raise DatasetFormatError(f"{folder}: no image frames ({', '.join(IMAGE_SUFFIXES)}) in this folder")
     indices = list(range(0, len(files), stride))[:max_frames]
     native = tuple(read_image(files[0]).shape[1:])
+    _check_memory(folder, len(files), native, stride, max_frames, resize)
     frames, _ = read_images([files[t] for t in indices], output_size(native, resize))
     extra = {"files": [files[t].name for t in indices]}
     return frames, indices, native, len(files), None, extra
@@ -61,6 +71,9 @@ def _read_file(path: Path, stride: int, max_frames: int | None, resize: Resize |
             return False if count_all else None  # go on only to count the frames
         return index % stride == 0
 
+    probed = probe_video(path)
+    if probed is not None:
+        _check_memory(path, *probed, stride, max_frames, resize)
     video = decode_video(path, keep, lambda native: output_size(native, resize))
     if not video.indices:
         raise DatasetFormatError(f"{path}: no frame could be read (empty or undecodable video)")
@@ -81,7 +94,10 @@ def _attach(scene: Scene, poses: PoseEstimates, where: str, total: int) -> Scene
     if missing:
         more = " ..." * (len(missing) > 5)
         raise DatasetFormatError(f"{where}: no pose estimates for video frames {missing[:5]}{more}")
-    scene = poses.apply_to(scene)  # no image_size: in native pixels (metadata["native_size"])
+    try:
+        scene = poses.apply_to(scene)  # no image_size: in native pixels (metadata["native_size"])
+    except SceneValidationError as err:
+        raise DatasetFormatError(f"{where}: {err}") from None
     if scene.keypoints_conf is not None and poses.keypoints2d is not None and not (scene.keypoints_conf > 0).any():
         raise DatasetFormatError(f"{where}: nobody is ever found in the pose estimates of the selected frames")
     return scene
@@ -108,7 +124,9 @@ def read_video(
 
     Raises FileNotFoundError (missing path), ValueError (bad arguments), DatasetFormatError
     naming the file (unreadable video, empty folder, undecodable frame, pose estimates not
-    matching the video's frames, or nobody ever found in them).
+    matching the video's frames, or nobody ever found in them), and, before decoding,
+    :class:`~lit_boot.data.memory.NotEnoughMemoryError` when the selected frames would not fit
+    in the available memory (its message suggests a stride, a frame count and a size that do).
     """
     if stride < 1:
         raise ValueError(f"stride must be >= 1, got {stride}")

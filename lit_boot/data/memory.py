@@ -1,0 +1,106 @@
+"""The memory a scene will take, checked before it is loaded rather than being killed by the OS.
+
+The estimate for T frames of H x W px (what running the method on them holds at once):
+
+- frames: T x H x W x 3 bytes (uint8 RGB);
+- flows: 2 x (T-1) x 2 x H x W x 4 bytes (float32; RAFT's initial flow and the current one);
+- RAFT's working memory: its all-pairs correlation pyramid for one pair, (h x w)^2 x 4 bytes
+  x 4/3 with h, w the sides / 8 after padding to at least 128 px, three times over while
+  fine-tuning (forward, gradient, pyramid), plus 256 MiB for the network and optimiser.
+
+Available memory: ``MemAvailable`` of /proc/meminfo, else free pages x page size; unknown
+means no check. ``LIT_BOOT_MEMORY_CHECK=0`` turns the check off.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+__all__ = ["MEMORY_CHECK_ENV", "MemoryEstimate", "NotEnoughMemoryError", "available_memory", "check_memory",
+           "estimate_memory"]  # fmt: skip
+
+MEMORY_CHECK_ENV = "LIT_BOOT_MEMORY_CHECK"
+_MODEL_BASE = 256 * 2**20
+_RAFT_MIN_SIDE = 128
+_RESIZE_HEIGHTS = (1080, 720, 540, 480, 360, 288, 240, 180, 128)
+
+
+class NotEnoughMemoryError(ValueError):
+    """A scene would not fit in the available memory; the message gives the figures and the way out."""
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available now (MemAvailable, else free pages); None when unknown."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES")
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+@dataclass(frozen=True)
+class MemoryEstimate:
+    """Bytes for the frames, the flows and RAFT's working memory (module docstring)."""
+
+    frames: int
+    flows: int
+    model: int
+
+    @property
+    def total(self) -> int:
+        return self.frames + self.flows + self.model
+
+
+def estimate_memory(num_frames: int, height: int, width: int) -> MemoryEstimate:
+    """The estimate (module docstring) for ``num_frames`` frames of ``width`` x ``height`` px."""
+    T, H, W = int(num_frames), int(height), int(width)
+    cells = math.ceil(max(H, _RAFT_MIN_SIDE) / 8) * math.ceil(max(W, _RAFT_MIN_SIDE) / 8)
+    pyramid = cells * cells * 4 * 4 // 3
+    flows = 2 * max(T - 1, 0) * 2 * H * W * 4
+    return MemoryEstimate(frames=T * H * W * 3, flows=flows, model=3 * pyramid + _MODEL_BASE)
+
+
+def _size(n: int) -> str:
+    return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
+
+
+def _suggestions(T: int, H: int, W: int, free: int) -> list[str]:
+    """What would fit: a stride, a frame count, a height; each with its estimate."""
+    fits = lambda t, h, w: estimate_memory(t, h, w).total <= free  # noqa: E731
+    out = []
+    stride = next((s for s in range(2, T + 1) if fits(math.ceil(T / s), H, W)), None)
+    if stride is not None:
+        out.append(f"--stride {stride} (~{_size(estimate_memory(math.ceil(T / stride), H, W).total)})")
+    frames = max((t for t in range(2, T) if fits(t, H, W)), default=None)
+    if frames is not None:
+        out.append(f"--max_frames {frames} (~{_size(estimate_memory(frames, H, W).total)})")
+    height = next((h for h in _RESIZE_HEIGHTS if h < H and fits(T, h, max(1, round(W * h / H)))), None)
+    if height is not None:
+        out.append(f"--resize {height} (~{_size(estimate_memory(T, height, max(1, round(W * height / H))).total)})")
+    return out
+
+
+def check_memory(where: object, num_frames: int, height: int, width: int, advice: str = "try") -> None:
+    """Raise :class:`NotEnoughMemoryError` naming ``where`` when the estimate for the scene
+    exceeds the available memory; ``advice`` introduces the options that would fit."""
+    if os.environ.get(MEMORY_CHECK_ENV, "1").strip().lower() in ("0", "false", "no", "off"):
+        return
+    free = available_memory()
+    need = estimate_memory(num_frames, height, width)
+    if free is None or need.total <= free:
+        return
+    options = _suggestions(num_frames, height, width, free)
+    way_out = f"{advice} {', '.join(options)}" if options else "use a machine with more memory"
+    raise NotEnoughMemoryError(
+        f"{where}: {num_frames} frames of {width}x{height} px need about {_size(need.total)} of memory (frames "
+        f"{_size(need.frames)}, flows {_size(need.flows)}, RAFT {_size(need.model)}) but {_size(free)} is available; "
+        f"{way_out} (or set {MEMORY_CHECK_ENV}=0 to skip this check)"
+    )
