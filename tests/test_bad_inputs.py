@@ -251,7 +251,7 @@ ROWS = {
     "scene-of-one-frame": Row(_one_frame, (r"needs at least 2 frames, has 1",)),
     "read-only-output": Row(_read_only, (r"out/scene: could not save the scene: Permission denied",)),
     "disk-full-output": Row(_disk_full, (r"out/scene: could not save the scene: no space left on the device; the "
-                                         r"scene needs up to [0-9.]+ MiB.*partial copy was removed",)),  # fmt: skip
+                                         r"scene needs up to \d+ KiB.*partial copy was removed",)),  # fmt: skip
     "too-little-memory-video": Row(_low_memory_video,
                                    (r"frames: 3 frames of 64x48 px need about .* --stride 2 .*--max_frames 2",)),
     "too-little-memory-scene-folder": Row(_low_memory_scene, (r"in/scene: 3 frames of 64x48 px need about",)),

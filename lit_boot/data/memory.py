@@ -19,7 +19,7 @@ import os
 from dataclasses import dataclass
 
 __all__ = ["MEMORY_CHECK_ENV", "MemoryEstimate", "NotEnoughMemoryError", "available_memory", "check_memory",
-           "estimate_memory"]  # fmt: skip
+           "estimate_memory", "format_bytes"]  # fmt: skip
 
 MEMORY_CHECK_ENV = "LIT_BOOT_MEMORY_CHECK"
 _MODEL_BASE = 256 * 2**20
@@ -68,24 +68,23 @@ def estimate_memory(num_frames: int, height: int, width: int) -> MemoryEstimate:
     return MemoryEstimate(frames=T * H * W * 3, flows=flows, model=3 * pyramid + _MODEL_BASE)
 
 
-def _size(n: int) -> str:
-    return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
+def format_bytes(n: float) -> str:
+    """``n`` bytes in GiB, MiB or KiB (``"1.5 GiB"``, ``"791 MiB"``, ``"27 KiB"``)."""
+    if n >= 2**30:
+        return f"{n / 2**30:.1f} GiB"
+    return f"{n / 2**20:.0f} MiB" if n >= 2**20 else f"{max(n / 2**10, 1):.0f} KiB"
 
 
 def _suggestions(T: int, H: int, W: int, free: int) -> list[str]:
     """What would fit: a stride, a frame count, a height; each with its estimate."""
-    fits = lambda t, h, w: estimate_memory(t, h, w).total <= free  # noqa: E731
-    out = []
-    stride = next((s for s in range(2, T + 1) if fits(math.ceil(T / s), H, W)), None)
-    if stride is not None:
-        out.append(f"--stride {stride} (~{_size(estimate_memory(math.ceil(T / stride), H, W).total)})")
-    frames = max((t for t in range(2, T) if fits(t, H, W)), default=None)
-    if frames is not None:
-        out.append(f"--max_frames {frames} (~{_size(estimate_memory(frames, H, W).total)})")
-    height = next((h for h in _RESIZE_HEIGHTS if h < H and fits(T, h, max(1, round(W * h / H)))), None)
-    if height is not None:
-        out.append(f"--resize {height} (~{_size(estimate_memory(T, height, max(1, round(W * height / H))).total)})")
-    return out
+    need = lambda t, h, w: estimate_memory(t, h, w).total  # noqa: E731
+    width = lambda h: max(1, round(W * h / H))  # noqa: E731
+    stride = next((s for s in range(2, T + 1) if need(math.ceil(T / s), H, W) <= free), None)
+    frames = max((t for t in range(2, T) if need(t, H, W) <= free), default=None)
+    height = next((h for h in _RESIZE_HEIGHTS if h < H and need(T, h, width(h)) <= free), None)
+    options = [("--stride", stride, (math.ceil(T / (stride or 1)), H, W)), ("--max_frames", frames, (frames, H, W)),
+               ("--resize", height, (T, height, width(height or H)))]  # fmt: skip
+    return [f"{flag} {value} (~{format_bytes(need(*size))})" for flag, value, size in options if value is not None]
 
 
 def check_memory(where: object, num_frames: int, height: int, width: int, advice: str = "try") -> None:
@@ -100,7 +99,7 @@ def check_memory(where: object, num_frames: int, height: int, width: int, advice
     options = _suggestions(num_frames, height, width, free)
     way_out = f"{advice} {', '.join(options)}" if options else "use a machine with more memory"
     raise NotEnoughMemoryError(
-        f"{where}: {num_frames} frames of {width}x{height} px need about {_size(need.total)} of memory (frames "
-        f"{_size(need.frames)}, flows {_size(need.flows)}, RAFT {_size(need.model)}) but {_size(free)} is available; "
-        f"{way_out} (or set {MEMORY_CHECK_ENV}=0 to skip this check)"
+        f"{where}: {num_frames} frames of {width}x{height} px need about {format_bytes(need.total)} of memory "
+        f"(frames {format_bytes(need.frames)}, flows {format_bytes(need.flows)}, RAFT {format_bytes(need.model)}) "
+        f"but {format_bytes(free)} is available; {way_out} (or set {MEMORY_CHECK_ENV}=0 to skip this check)"
     )

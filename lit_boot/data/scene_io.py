@@ -26,7 +26,7 @@ import torch
 from ..core.cameras import Cameras
 from ..core.scene import GroundTruth, Scene, SceneValidationError
 from .atomic import atomic_directory, atomic_write_bytes
-from .memory import check_memory
+from .memory import check_memory, format_bytes
 from .visualize import read_png, write_png
 
 __all__ = ["SCENE_FORMAT", "SCENE_FORMAT_VERSION", "SceneFormatError", "load_scene", "save_scene"]
@@ -146,7 +146,7 @@ def _write_error(path: Path, err: OSError, size: int) -> OSError:
     (disk full) how much room the scene needs."""
     reason = err.strerror or str(err)
     if err.errno == errno.ENOSPC:
-        reason = f"no space left on the device; the scene needs up to {size / 2**20:.1f} MiB"
+        reason = f"no space left on the device; the scene needs up to {format_bytes(size)}"
     where = f" (writing {err.filename})" if err.filename else ""
     message = f"{path}: could not save the scene: {reason}{where}; nothing was saved and the partial copy was removed"
     return type(err)(err.errno, message) if err.errno is not None else type(err)(message)
