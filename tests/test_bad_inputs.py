@@ -178,6 +178,15 @@ def _sintel_row(second_flo: Callable[[bytes], bytes]) -> Callable:
     return build
 
 
+def _nan_flows_for_pose_fit(src: Path, out: Path, mp: pytest.MonkeyPatch) -> list[str]:
+    save_scene(_scene(), src / "scene")
+    (src / "flows").mkdir()
+    good = write_flo(src / "flows" / "flow_000000.flo", _scene().gt.flow[0]).read_bytes()
+    (src / "flows" / "flow_000001.flo").write_bytes(_nan_flo(good))
+    return ["fit", "--config", str(CONFIGS / "pose_refiner.yaml"), "--data.scene", str(src / "scene"),
+            "--data.flows", str(src / "flows"), "--trainer.max_steps", "2"]  # fmt: skip
+
+
 def _video_with_poses(**poses) -> Callable:
     def build(src: Path, out: Path, mp: pytest.MonkeyPatch) -> list[str]:
         _frames(src / "frames")
@@ -226,6 +235,7 @@ ROWS = {
     "truncated-flo": Row(_sintel_row(lambda b: b[:100]), (SINTEL + r"\.flo file truncated: expected 24588 .*100",)),
     "foreign-flo": Row(_sintel_row(lambda b: b"RIFF" + b[4:]), (SINTEL + r"not a Middlebury .*expected 202021\.25",)),
     "nan-flo": Row(_sintel_row(_nan_flo), (SINTEL + r"corrupted: every value is NaN or infinite",)),
+    "nan-flo-pose-refiner": Row(_nan_flows_for_pose_fit, (r"flows/flow_000001\.flo: \.flo file holds NaN or inf",)),
     "text-file-named-mp4-import": Row(_text_mp4("import"), (r"clip\.mp4: unreadable video",)),
     "text-file-named-mp4-estimate-pose": Row(_text_mp4("estimate-pose"), (r"clip\.mp4: unreadable video",)),
     "corrupt-png-frame": Row(_corrupt_png, (r"frames/0001\.png: unreadable image",)),
