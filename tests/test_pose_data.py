@@ -55,6 +55,14 @@ def test_wrong_count_wrong_size_and_missing_paths_name_what_was_expected(scene, 
     np.savez(tmp_path / "nokey.npz", flows=np.zeros((3, 2, 40, 56), np.float32))
     with pytest.raises(FlowSourceError, match="'flow'"):
         load_flows(tmp_path / "nokey.npz", scene)
+    (tmp_path / "empty.npz").write_bytes(b"")
+    with pytest.raises(FlowSourceError, match=r"empty\.npz: not a readable \.npz file"):
+        load_flows(tmp_path / "empty.npz", scene)
+    nan = np.zeros((3, 2, 40, 56), np.float32)
+    nan[1, :, 5, 7] = np.nan
+    np.savez(tmp_path / "nan.npz", flow=nan)
+    with pytest.raises(FlowSourceError, match=r"nan\.npz: 'flow' holds NaN or infinite values at 1 pixels"):
+        load_flows(tmp_path / "nan.npz", scene)
     with pytest.raises(FlowSourceError, match=r"expected flows of shape \(3, 2, 40, 56\)"):
         load_flows(torch.zeros(3, 40, 56), scene)
     no_gt = make_scene(motion="jump", frames=2, height=40, width=56, seed=2)

@@ -77,11 +77,14 @@ def _read_npz(path: Path, pairs: int, height: int, width: int) -> torch.Tensor:
     try:
         with np.load(path) as data:
             arrays = {key: np.asarray(data[key]) for key in data.files if key in ("flow", "index")}
-    except (OSError, ValueError, zipfile.BadZipFile) as err:
-        raise FlowSourceError(f"{path}: not a readable .npz file ({err})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise FlowSourceError(f"{path}: not a readable .npz file ({type(err).__name__}: {err})") from None
     if "flow" not in arrays:
         raise FlowSourceError(f"{path}: expected an array 'flow' (P, 2, H, W), found none")
     flow = torch.from_numpy(arrays["flow"].astype(np.float32))
+    if not torch.isfinite(flow).all():
+        bad = int((~torch.isfinite(flow)).any(dim=-3).sum()) if flow.ndim >= 3 else int((~torch.isfinite(flow)).sum())
+        raise FlowSourceError(f"{path}: 'flow' holds NaN or infinite values at {bad} pixels (expected finite px)")
     index = arrays.get("index")
     if index is not None:
         if index.shape != (flow.shape[0],):
