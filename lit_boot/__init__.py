@@ -17,72 +17,77 @@ The public API:
   :class:`BootstrapConfig` and :class:`BootstrapResult`;
 - real data (``lit_boot.data.readers``): :func:`read_video` (a video file or a folder of
   frames), :func:`read_estimates` (pose files of several formats) and :class:`PoseEstimates`.
+
+The names are imported on first use (``import lit_boot`` does not import torch or Lightning),
+so the command line starts fast.
 """
 
-from .core import (
-    COCO17,
-    H36M17,
-    LSP14,
-    MEDIAPIPE33,
-    Cameras,
-    GroundTruth,
-    JointLayout,
-    Scene,
-    SceneValidationError,
-    get_layout,
-    map_joints,
-)
-from .bootstrap import Bootstrap, BootstrapConfig, BootstrapResult
-from .data import load_scene, read_flo, save_scene, write_flo
-from .data.readers import PoseEstimates, read_estimates, read_video
-from .flow import FlowTTT, SketchConfig
-from .pose import (
-    KeypointLossWeights,
-    KeypointRefiner,
-    PoseData,
-    PoseLossWeights,
-    PoseRefiner,
-    PoseResult,
-    load_pose_result,
-    refine_poses,
-)
-from .synth import SynthConfig, make_scene
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # what the lazy names below resolve to, for type checkers and IDEs
+    from .bootstrap import Bootstrap, BootstrapConfig, BootstrapResult
+    from .core import (
+        COCO17,
+        H36M17,
+        LSP14,
+        MEDIAPIPE33,
+        Cameras,
+        GroundTruth,
+        JointLayout,
+        Scene,
+        SceneValidationError,
+        get_layout,
+        map_joints,
+    )
+    from .data import load_scene, read_flo, save_scene, write_flo
+    from .data.readers import PoseEstimates, read_estimates, read_video
+    from .flow import FlowTTT, SketchConfig
+    from .pose import (
+        KeypointLossWeights,
+        KeypointRefiner,
+        PoseData,
+        PoseLossWeights,
+        PoseRefiner,
+        PoseResult,
+        load_pose_result,
+        refine_poses,
+    )
+    from .synth import SynthConfig, make_scene
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "COCO17",
-    "H36M17",
-    "LSP14",
-    "MEDIAPIPE33",
-    "Cameras",
-    "GroundTruth",
-    "JointLayout",
-    "Scene",
-    "SceneValidationError",
-    "get_layout",
-    "map_joints",
-    "load_scene",
-    "read_flo",
-    "save_scene",
-    "write_flo",
-    "SynthConfig",
-    "make_scene",
-    "PoseRefiner",
-    "PoseLossWeights",
-    "KeypointRefiner",
-    "KeypointLossWeights",
-    "PoseData",
-    "PoseResult",
-    "load_pose_result",
-    "refine_poses",
-    "FlowTTT",
-    "SketchConfig",
-    "Bootstrap",
-    "BootstrapConfig",
-    "BootstrapResult",
-    "read_video",
-    "read_estimates",
-    "PoseEstimates",
-    "__version__",
-]
+#: Public name -> the subpackage that defines it (imported when the name is first used).
+_LAZY = {
+    **dict.fromkeys(["COCO17", "H36M17", "LSP14", "MEDIAPIPE33", "Cameras", "GroundTruth", "JointLayout",
+                     "Scene", "SceneValidationError", "get_layout", "map_joints"], ".core"),
+    **dict.fromkeys(["load_scene", "read_flo", "save_scene", "write_flo"], ".data"),
+    **dict.fromkeys(["SynthConfig", "make_scene"], ".synth"),
+    **dict.fromkeys(["PoseRefiner", "PoseLossWeights", "KeypointRefiner", "KeypointLossWeights", "PoseData",
+                     "PoseResult", "load_pose_result", "refine_poses"], ".pose"),
+    **dict.fromkeys(["FlowTTT", "SketchConfig"], ".flow"),
+    **dict.fromkeys(["Bootstrap", "BootstrapConfig", "BootstrapResult"], ".bootstrap"),
+    **dict.fromkeys(["read_video", "read_estimates", "PoseEstimates"], ".data.readers"),
+}  # fmt: skip
+
+#: Subpackages, reachable as attributes (``lit_boot.metrics.epe``) without importing them first.
+_SUBPACKAGES = ("bootstrap", "core", "data", "estimate", "flow", "metrics", "pose", "synth")
+
+__all__ = [*_LAZY, "__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name's subpackage, or a subpackage, on first use (PEP 562)."""
+    if name in _SUBPACKAGES:
+        return importlib.import_module(f".{name}", __name__)
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+    globals()[name] = value  # later look-ups skip __getattr__
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__, *_SUBPACKAGES})

@@ -20,15 +20,32 @@ Subcommands:
   prints a before/after table.
 
 ``--print_config`` shows every option as YAML and ``--config FILE`` reads them from one.
+
+Nothing heavy (torch, Lightning) is imported before a command's arguments are parsed, so
+``lit-boot --help`` answers at once. A command prints lit-boot's own lines and progress bars;
+Lightning's info lines and known dependency warnings are dropped (:mod:`lit_boot.console`)
+unless ``lit-boot --verbose COMMAND ...`` or ``LIT_BOOT_VERBOSE=1``. A bad argument or input
+file is one ``lit-boot COMMAND: error: ...`` line on stderr and exit status 2.
 """
 
 from __future__ import annotations
 
 import json
 import sys
+from argparse import ArgumentError
 from pathlib import Path
 
-from jsonargparse import ActionConfigFile, ArgumentParser
+from jsonargparse import ActionConfigFile
+
+from .console import (
+    ArgumentParser,
+    CliError,
+    command_output,
+    drop_native_noise,
+    error_line,
+    is_user_error,
+    verbose_requested,
+)
 
 __all__ = ["main"]
 
@@ -176,21 +193,18 @@ def _estimate_pose_parser() -> ArgumentParser:
 
 def estimate_pose(argv: list[str]) -> int:
     """``lit-boot estimate-pose``: MediaPipe Pose on a video -> pose file; one summary line."""
+    args = _estimate_pose_parser().parse_args(argv)
     from .estimate import MediaPipeUnavailable, estimate_pose_file
 
-    args = _estimate_pose_parser().parse_args(argv)
     options = {k: args[k] for k in ("stride", "max_frames", "resize", "model_complexity",
                                     "min_detection_confidence", "on_jump")}  # fmt: skip
     try:
-        _, summary = estimate_pose_file(args.video, args.out, overwrite=args.overwrite, **options)
+        with drop_native_noise():
+            _, summary = estimate_pose_file(args.video, args.out, overwrite=args.overwrite, **options)
     except MediaPipeUnavailable as err:
         raise CliError(str(err)) from None
     print(f"{summary}; wrote {args.out}")
     return 0
-
-
-class CliError(Exception):
-    """A user error: printed as one line, exit status 2."""
 
 
 def import_scene(argv: list[str]) -> int:
@@ -204,25 +218,68 @@ def lightning(argv: list[str]) -> int:
     """``lit-boot fit|validate|predict``: Lightning's CLI over lit-boot's modules and data."""
     from .lightning_cli import run_lightning_cli
 
-    run_lightning_cli(argv)
+    trainer = run_lightning_cli(argv).trainer
+    print(f"run folder: {trainer.default_root_dir} (this run's logs: {trainer.log_dir})")
     return 0
 
 
 COMMANDS = {"synth": synth, "import": import_scene, "bootstrap": bootstrap, "demo": demo, "estimate-pose": estimate_pose,
             "fit": lightning, "validate": lightning, "predict": lightning}
 
+#: The parsers ``COMMAND --help`` answers from before the command runs (and imports what it needs).
+PARSERS = {"synth": _synth_parser, "bootstrap": _bootstrap_parser, "demo": _demo_parser,
+           "estimate-pose": _estimate_pose_parser}  # fmt: skip
+
+#: One line per command for ``lit-boot --help``.
+SUMMARIES = {
+    "synth": "write a synthetic human scene folder with exact ground truth (flow, joints, masks)",
+    "import": "read a dataset scene (MPI-Sintel, 3DPW, Human3.6M) or a video into a scene folder",
+    "bootstrap": "run the method (flow -> pose -> flow) on a scene folder or a video; reruns resume",
+    "demo": "make a small synthetic scene, bootstrap it, print EPE and MPJPE before and after",
+    "estimate-pose": "MediaPipe Pose on a video: 2D keypoints, 3D joints and cameras to a pose file",
+    "fit": "train one stage's model (FlowTTT, PoseRefiner, ...) on one scene (Lightning's CLI)",
+    "validate": "evaluate one stage's model on one scene without training (Lightning's CLI)",
+    "predict": "write one stage's predictions (e.g. flow files) for one scene (Lightning's CLI)",
+}
+
+
+def usage() -> str:
+    """``lit-boot --help``: the commands with one line each."""
+    rows = "\n".join(f"  {name:<14} {SUMMARIES[name]}" for name in COMMANDS)
+    return (
+        "usage: lit-boot [--verbose] COMMAND [options]\n\n"
+        "Test-time bootstrapping of human optical flow and human pose.\n\n"
+        f"commands:\n{rows}\n\n"
+        "options:\n"
+        "  -h, --help     show this message; lit-boot COMMAND --help shows a command's options\n"
+        "  --verbose      keep Lightning's info lines and all dependency warnings (or LIT_BOOT_VERBOSE=1)"
+    )
+
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``lit-boot`` console script."""
+    """Entry point of the ``lit-boot`` console script: exit status 0, or 2 with one error line."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
-        names = ", ".join(COMMANDS)
-        print(f"usage: lit-boot {{{names}}} [options]   (lit-boot COMMAND --help for the options)")
-        return 0 if argv[:1] in ([], ["-h"], ["--help"]) else 2
+    verbose = verbose_requested()
+    if argv[:1] == ["--verbose"]:
+        argv, verbose = argv[1:], True
+    if not argv or argv[0] in ("-h", "--help"):
+        print(usage())
+        return 0
+    name = argv[0]
+    if name not in COMMANDS:
+        print(f"lit-boot: error: unknown command {name!r}; one of {', '.join(COMMANDS)} (lit-boot --help)",
+              file=sys.stderr)  # fmt: skip
+        return 2
     try:
-        return COMMANDS[argv[0]](argv if COMMANDS[argv[0]] is lightning else argv[1:])
-    except (CliError, ValueError, OSError) as err:
-        print(f"lit-boot {argv[0]}: error: {err}", file=sys.stderr)
+        if name in PARSERS and any(arg in ("-h", "--help") for arg in argv[1:]):
+            PARSERS[name]().parse_args(argv[1:])  # prints the help and exits
+        with command_output(verbose):
+            return COMMANDS[name](argv if COMMANDS[name] is lightning else argv[1:])
+    except Exception as err:
+        if not is_user_error(err):
+            raise
+        hint = f" (lit-boot {name} --help lists the options)" if isinstance(err, ArgumentError) else ""
+        print(f"lit-boot {name}: error: {error_line(err)}{hint}", file=sys.stderr)
         return 2
 
 

@@ -11,37 +11,101 @@ Kinds and their readers (every reader argument is a flag; positional ones come f
 JSON; see :func:`lit_boot.data.readers.read_estimates`); ``--estimate true`` runs MediaPipe
 Pose on the frames instead (the ``mediapipe`` extra). The folder is what ``lit-boot bootstrap
 --data.scene`` reads.
+
+A kind's description is its reader's first docstring paragraph, read from the source file, so
+``lit-boot import --help`` imports no reader (nor torch); only the chosen kind's reader is
+imported, for its arguments.
 """
 
 from __future__ import annotations
 
+import ast
+import importlib
+from collections.abc import Iterable
+from functools import cache
 from pathlib import Path
 from typing import Any, Callable
 
-from jsonargparse import ArgumentParser
+from .console import ArgumentParser, drop_native_noise, plain
 
-__all__ = ["import_scene", "import_parser"]
+__all__ = ["import_scene", "import_parser", "KINDS"]
+
+#: Kind -> (module in lit_boot.data.readers, reader function).
+KINDS = {"sintel": ("sintel", "read_sintel"), "3dpw": ("pw3d", "read_3dpw"), "h36m": ("h36m", "read_h36m"),
+         "video": ("video", "read_video")}  # fmt: skip
+
+_RANGE = "(inclusive; default: all)"
+#: Help of the readers' arguments (their docstrings describe them in prose, not per argument).
+ARG_HELP: dict[str, str] = {
+    "root": "the dataset's root folder",
+    "scene": "Sintel scene name (e.g. alley_1)",
+    "pass_name": "Sintel pass: final or clean",
+    "sequence": "3DPW sequence name (e.g. downtown_walking_00)",
+    "person": "which person of the sequence (0-based)",
+    "split": "train, validation or test (default: search all three)",
+    "invalid": "frames whose GT is not aligned to the image: drop them, keep them, or error",
+    "subject": "Human3.6M subject (e.g. S9)",
+    "action": 'action name (e.g. "Walking 1")',
+    "camera": "camera id (default: the paper's evaluation camera)",
+    "camera_params": "camera calibration (default: the built-in one for the subject and camera)",
+    "video": "the video file or frame folder (default: the standard path under root)",
+    "positions_3d": "3D joints npz (default: the standard path under root)",
+    "positions_2d": "2D joints npz (default: the standard path under root)",
+    "path": "a video file (mp4, anything OpenCV reads) or a folder of frames",
+    "first": f"first frame, 0-based {_RANGE}",
+    "last": f"last frame, 0-based {_RANGE}",
+    "stride": "keep every N-th frame",
+    "max_frames": "keep at most N frames",
+    "size": "resize to [height, width] px",
+    "resize": "resize: a height in px (int), a scale (float) or [height, width]",
+    "fps": "the source's frame rate (default: the file's; 30 for a folder)",
+}
+ARG_HELP_BY_KIND = {
+    "sintel": {"first": f"first frame number, from 1 {_RANGE}", "last": f"last frame number {_RANGE}"},
+    "3dpw": {"joints_layout": "layout of the GT joints: lsp14 (the paper's 14) or smpl (24)"},
+    "h36m": {"joints_layout": "layout of the GT joints: lsp14 (the paper's 14) or h36m17"},
+}
 
 
-def _readers() -> dict[str, Callable[..., Any]]:
-    from .data.readers import read_3dpw, read_h36m, read_sintel, read_video
+def _reader(kind: str) -> Callable[..., Any]:
+    module, name = KINDS[kind]
+    return getattr(importlib.import_module(f"lit_boot.data.readers.{module}"), name)
 
-    return {"sintel": read_sintel, "3dpw": read_3dpw, "h36m": read_h36m, "video": read_video}
+
+@cache
+def describe(kind: str) -> str:
+    """The first paragraph of ``kind``'s reader docstring, one line, without reST markup (read
+    from the source, importing nothing)."""
+    module, name = KINDS[kind]
+    source = (Path(__file__).parent / "data" / "readers" / f"{module}.py").read_text(encoding="utf-8")
+    node = next(n for n in ast.walk(ast.parse(source)) if isinstance(n, ast.FunctionDef) and n.name == name)
+    return plain(" ".join((ast.get_docstring(node) or "").split("\n\n", 1)[0].split()))
 
 
-def import_parser() -> ArgumentParser:
-    """The parser of ``lit-boot import``: one subcommand per reader."""
+def import_parser(kinds: Iterable[str] | None = None) -> ArgumentParser:
+    """The parser of ``lit-boot import``: one subcommand per reader; ``kinds`` (default: all)
+    get their reader's arguments, the others are only listed (their readers not imported)."""
+    full = set(KINDS if kinds is None else kinds)
     parser = ArgumentParser(prog="lit-boot import", description="Read a dataset scene or a video into a scene folder.")
-    kinds = parser.add_subcommands(dest="kind")
-    for kind, reader in _readers().items():
-        sub = ArgumentParser(description=(reader.__doc__ or "").strip().splitlines()[0])
-        sub.add_function_arguments(reader, nested_key=None, as_positional=True, skip={"poses"})
+    subcommands = parser.add_subcommands(dest="kind")
+    for kind in KINDS:
+        sub = ArgumentParser(description=describe(kind))
+        if kind in full:
+            _add_reader_arguments(sub, kind)
         sub.add_argument("--poses", type=Path | None, default=None, help="pose estimates to attach (file)")
         sub.add_argument("--estimate", type=bool, default=False, help="estimate poses with MediaPipe Pose")
         sub.add_argument("--out", type=Path, required=True, help="scene folder to write")
         sub.add_argument("--overwrite", type=bool, default=False, help="replace an existing scene folder")
-        kinds.add_subcommand(kind, sub, help=sub.description)
+        subcommands.add_subcommand(kind, sub, help=describe(kind))
     return parser
+
+
+def _add_reader_arguments(parser: ArgumentParser, kind: str) -> None:
+    parser.add_function_arguments(_reader(kind), nested_key=None, as_positional=True, as_group=False, skip={"poses"})
+    helps = {**ARG_HELP, **ARG_HELP_BY_KIND.get(kind, {})}
+    for action in parser._actions:  # jsonargparse takes help from "Args:" docstrings; the readers have prose
+        if action.help is None and action.dest in helps:
+            action.help = helps[action.dest]
 
 
 def with_poses(scene, poses: Path | None, estimate: bool):
@@ -55,24 +119,25 @@ def with_poses(scene, poses: Path | None, estimate: bool):
     if estimate:
         from .estimate import estimate_poses
 
-        return estimate_poses(scene.frames).apply_to(scene)
+        with drop_native_noise():  # MediaPipe's native start-up lines
+            return estimate_poses(scene.frames).apply_to(scene)
     return scene
 
 
 def import_scene(argv: list[str]) -> int:
     """``lit-boot import``: read, attach poses, save the scene folder, print its summary."""
+    args = import_parser([argv[0]] if argv[:1] and argv[0] in KINDS else []).parse_args(argv)
     from .data import save_scene
 
-    args = import_parser().parse_args(argv)
     options = dict(vars(args[args.kind]))
     poses, estimate = options.pop("poses"), options.pop("estimate")
     out, overwrite = options.pop("out"), options.pop("overwrite")
     if out.exists() and not overwrite and (not out.is_dir() or any(out.iterdir())):
         raise FileExistsError(f"--out {out}: exists and is not empty (pass --overwrite true to replace it)")
     if args.kind == "video" and not estimate:  # read_video selects and checks the pose rows itself
-        scene = _readers()["video"](**options, poses=poses)
+        scene = _reader("video")(**options, poses=poses)
     else:
-        scene = with_poses(_readers()[args.kind](**options), poses, estimate)
+        scene = with_poses(_reader(args.kind)(**options), poses, estimate)
     save_scene(scene, out, overwrite=overwrite)
     print(scene.summary())
     print(f"wrote {out}")

@@ -3,20 +3,42 @@
 The model and the data are chosen by the config (``model.class_path``, ``data.class_path``), so
 FlowTTT and the later stages share one command. Without ``trainer.default_root_dir`` a run goes
 to ``runs/<scene folder name>/<model class name>``.
+
+As lit-boot's own commands: no abbreviated options, a bad argument raises
+:class:`argparse.ArgumentError`, and a model or data that cannot be built (missing scene, bad
+weights file) raises :class:`~lit_boot.console.CliError` with the reason in one line, before
+any run folder exists. A run that fails before it trained anything leaves no folder behind.
 """
 
 from __future__ import annotations
 
+import re
+import shutil
+from fnmatch import fnmatch
 from pathlib import Path
 
 import lightning as L
-from lightning.pytorch.cli import LightningCLI
+from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
 
-__all__ = ["LitBootCLI", "run_lightning_cli"]
+from .console import CliError, HelpFormatter, error_line
+
+__all__ = ["LitBootArgumentParser", "LitBootCLI", "run_lightning_cli"]
+
+#: Files a Lightning run writes before it has done anything: a folder holding only these is no loss.
+BOOKKEEPING = ("events.out.tfevents.*", "hparams.yaml", "config.yaml", "metrics.csv")
+
+
+class LitBootArgumentParser(LightningArgumentParser):
+    """Lightning's parser with lit-boot's defaults (see :class:`lit_boot.console.ArgumentParser`)."""
+
+    def __init__(self, *args, allow_abbrev: bool = False, exit_on_error: bool = False, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, allow_abbrev=allow_abbrev, exit_on_error=exit_on_error, **kwargs)
 
 
 class LitBootCLI(LightningCLI):
-    """LightningCLI with a per-scene default run folder."""
+    """LightningCLI with a per-scene default run folder, one-line build errors, and no empty run
+    folders left by a failed run."""
 
     def before_instantiate_classes(self) -> None:
         config = self.config[self.subcommand] if self.subcommand else self.config
@@ -26,6 +48,54 @@ class LitBootCLI(LightningCLI):
             model = config.model.class_path.rsplit(".", 1)[-1] if config.get("model") else "model"
             name = Path(str(scene)).name if scene else "scene"
             config.trainer.default_root_dir = str(Path("runs") / name / model)
+
+    def instantiate_classes(self) -> None:
+        """Build the model, data and trainer; a failure is a :class:`CliError` naming its cause."""
+        try:
+            super().instantiate_classes()
+        except (ValueError, OSError) as err:
+            config = self.config[self.subcommand] if self.subcommand else self.config
+            raise CliError(build_error(err, config)) from err
+
+    def _run_subcommand(self, subcommand: str) -> None:
+        roots = {Path(self.trainer.default_root_dir).resolve()}
+        roots |= {Path(logger.save_dir).resolve() for logger in self.trainer.loggers if logger.save_dir}
+        before = {root: existing_folders(root) for root in roots}
+        try:
+            super()._run_subcommand(subcommand)
+        except BaseException:
+            if self.trainer.global_step == 0:  # nothing trained: drop what this run created, if only bookkeeping
+                for root, existed in before.items():
+                    remove_new_bookkeeping(root, existed)
+            raise
+
+
+def build_error(err: BaseException, config) -> str:
+    """Why a class could not be built, in one line: the option (``--model``, ``--data``) and class,
+    then the reason jsonargparse wrapped in its report of the union's subtypes."""
+    building = re.search(r"class_path='([\w.]+)'", str(err))
+    if building is None:
+        return error_line(err)
+    keys = [k for k in ("model", "data") if config.get(k) and config[k].get("class_path") == building.group(1)]
+    return f"could not build {'--' + keys[0] + ' ' if keys else ''}{building.group(1)}: {error_line(err)}"
+
+
+def existing_folders(root: Path, depth: int = 3) -> set[Path]:
+    """``root``, its existing ancestors and the folders up to ``depth`` levels under it (Lightning's
+    ``lightning_logs/version_N/checkpoints``), as they are now."""
+    folders = {p for p in (root, *root.parents) if p.is_dir()}
+    return folders | {p for level in range(1, depth + 1) for p in root.glob("/".join(["*"] * level)) if p.is_dir()}
+
+
+def remove_new_bookkeeping(root: Path, existed: set[Path]) -> None:
+    """Remove each outermost folder on, above or under ``root`` that is not in ``existed`` (made
+    since) and holds only :data:`BOOKKEEPING` files."""
+    new = existing_folders(root) - existed
+    for folder in sorted(new):
+        if folder.parent not in new and folder.is_dir():
+            files = [p for p in folder.rglob("*") if p.is_file()]
+            if all(any(fnmatch(p.name, pattern) for pattern in BOOKKEEPING) for p in files):
+                shutil.rmtree(folder)
 
 
 def run_lightning_cli(argv: list[str]) -> LitBootCLI:
@@ -37,4 +107,5 @@ def run_lightning_cli(argv: list[str]) -> LitBootCLI:
         subclass_mode_data=True,
         args=argv,
         save_config_kwargs={"overwrite": True},
+        parser_class=LitBootArgumentParser,
     )

@@ -60,3 +60,38 @@ def test_bootstrap_a_video_alone_estimates_poses_then_runs(shared, tmp_path, cap
     out = capsys.readouterr().out
     assert "| agreement_px |" in out
     assert (tmp_path / "run/poses.npz").is_file() and (tmp_path / "run/summary.json").is_file()
+
+
+def help_of(argv, capsys) -> str:
+    with pytest.raises(SystemExit) as done:
+        main(argv)
+    assert done.value.code == 0
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_import_help_gives_each_reader_its_whole_first_paragraph_as_plain_text(capsys):
+    listing = help_of(["import", "--help"], capsys)
+    sintel = "Read frames first..last (inclusive, Sintel's numbering from 1; default: all) of one scene as a Scene"
+    assert f"{sintel} at 24 fps." in listing
+    assert "natural name order) as a Scene: frames 0, stride, 2 stride, ... (at most max_frames)." in listing
+    for kind in ("sintel", "3dpw", "h36m", "video"):
+        text = help_of(["import", kind, "--help"], capsys)
+        assert "``" not in text and ":class:" not in text and ":func:" not in text and "<class" not in text
+        assert "required, type: str | PathLike" in text  # the reader's positional path argument
+    sintel = help_of(["import", "sintel", "--help"], capsys)
+    assert "at 24 fps." in sintel and "--first FIRST first frame number, from 1" in sintel
+
+
+def test_import_errors_are_one_line(tmp_path, capsys):
+    cases = [(["import", "video", str(tmp_path / "v.mp4"), "--out", str(tmp_path / "s"), "--strid", "2"],
+              "unrecognized arguments: --strid"),
+             (["import", "sintel", str(tmp_path), "alley_1", "--out", str(tmp_path / "s"), "--first", "abc"],
+              "--first: expected int, got 'abc'"),
+             (["import", "sintel", str(tmp_path / "none"), "alley_1", "--out", str(tmp_path / "s")],
+              str(tmp_path / "none")),
+             (["import", "fly", "--out", str(tmp_path / "s")], "invalid choice: 'fly'")]  # fmt: skip
+    for argv, words in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert words in err and len(err.splitlines()) == 1 and err.startswith("lit-boot import: error: "), err
+    assert not (tmp_path / "s").exists()

@@ -68,7 +68,13 @@ class BootstrapConfig:
     Args:
         mode: 3d (joints and cameras; the stick-man from projected joints) or 2d (2D keypoints
             only; paper 3.3).
-        preset: paper or default (see the module doc).
+        preset: the method's choices the run starts from. default: the paper's text, the
+            stick-man painted with crosses of radius 15 px at a person 450 px tall, scaled to
+            the person's height in the video (at least 2 px). paper: the authors' code, 30x30
+            px squares (6x6 in 2d mode) at 22 points per bone, whatever the person's size.
+            Both: 20 RAFT updates in training, loss on the final prediction, lr 1e-5, binary
+            confidences, 16-bit mixed precision on CUDA. --flow and --pose override them key
+            by key.
         cycles: pose cycles; the run is flow, (pose, flow) x cycles: the paper's 1 gives
             flow -> pose -> flow.
         flow: FlowTTT arguments over the preset's (arch, weights, lr, sketch, crop_margin, ...).
@@ -79,8 +85,8 @@ class BootstrapConfig:
             10 steps).
         restart_flow: each flow stage starts from the pretrained weights (else, as the
             authors, it continues from the previous flow stage's).
-        flow_ensemble: extra FlowTTT argument dicts (e.g. ``[{"arch": "raft_large", "weights":
-            "C_T_V1"}]``): each network is fine-tuned alike and the flows are averaged (Table 2).
+        flow_ensemble: extra FlowTTT argument dicts (e.g. [{"arch": "raft_large", "weights":
+            "C_T_V1"}]): each network is fine-tuned alike and the flows are averaged (Table 2).
         pose_ensemble: extra refined-pose folders (poses.npz + poses.json, e.g. another
             estimator's joints in the same layout) averaged with the scene's estimates first.
         accelerator: for the flow stages (auto: CUDA when available).
@@ -88,9 +94,10 @@ class BootstrapConfig:
         precision: Lightning precision of the flow stages; None: the preset's on CUDA
             (mixed), 32-true on CPU.
         drift_guard: after each stage the flow-pose agreement is compared with before it:
-            record only, stop the run when it worsens by more than ``drift_tolerance`` px, or
-            roll that stage back and stop.
-        drift_tolerance: px.
+            record (only record it), stop (stop the run when it worsens by more than
+            drift_tolerance px) or rollback (undo that stage and stop).
+        drift_tolerance: how much worse (px) the flow-pose agreement may get before the drift
+            guard acts.
         flow_format: flo (one Middlebury file per pair) or npz for the run's final flows.
         video: write overlay.mp4.
         progress_bar: Lightning's progress bars.

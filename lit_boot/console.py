@@ -1,0 +1,238 @@
+"""What the ``lit-boot`` command prints: its own lines, progress bars, and errors as one line.
+
+Cheap to import (no torch, no Lightning): the command line parses, and answers ``--help``, first.
+
+- :class:`ArgumentParser`: jsonargparse's parser with the command line's defaults (no abbreviated
+  options; a bad argument raises instead of printing the whole usage);
+- :func:`command_output`: around each command: Lightning's info lines (accelerator summary,
+  tips, model summary, "Seed set to") and the known dependency warnings off; lit-boot's own
+  log records to stdout; ``lit-boot --verbose`` (or ``LIT_BOOT_VERBOSE=1``) keeps everything;
+- :func:`error_line`: an exception (jsonargparse's multi-line ones included) as one line;
+- :func:`drop_native_noise`: MediaPipe's native start-up lines removed from stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import re
+import sys
+import threading
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import jsonargparse
+
+__all__ = ["ArgumentParser", "CliError", "HelpFormatter", "command_output", "drop_native_noise", "error_line",
+           "is_user_error", "plain", "verbose_requested"]
+
+#: Lightning loggers whose INFO records are noise on the command line (WARNING and up stay).
+LIGHTNING_INFO_LOGGERS = (
+    "lightning.pytorch.utilities.rank_zero",  # "GPU available: ...", "TPU available: ...", the 💡 litlogger /
+    "lightning.fabric.utilities.rank_zero",  # litmodels tips, "`Trainer.fit` stopped: ...", "Restoring states ..."
+    "lightning.fabric.utilities.seed",  # "Seed set to 0"
+    "lightning.pytorch.callbacks.model_summary",  # the parameter table at the start of fit
+    "lightning.pytorch.accelerators.cuda",  # "LOCAL_RANK: 0 - CUDA_VISIBLE_DEVICES: [0]"
+)
+
+#: (message regex, category, module regex) of dependency warnings that say nothing to a user.
+KNOWN_WARNINGS = (
+    # torch >= 2.10 deprecates LeafSpec, which Lightning's pytree helper still builds (every Trainer run)
+    (r"`isinstance\(treespec, LeafSpec\)` is deprecated", FutureWarning, r"lightning\.pytorch\.utilities\._pytree"),
+    # lit-boot passes the command line to LightningCLI as args on purpose
+    (r"LightningCLI's args parameter is intended to run from within Python", UserWarning, r"lightning\.pytorch\.cli"),
+)
+
+#: MediaPipe's native (C++) start-up lines on stderr: TFLite's delegate notice, absl's pre-init note
+#: and its feedback-tensor warning (once per model).
+NATIVE_NOISE = re.compile(
+    r"INFO: Created TensorFlow Lite XNNPACK delegate for CPU\."
+    r"|WARNING: All log messages before absl::InitializeLog\(\) is called are written to STDERR"
+    r"|W\d{4} [\d:.]+ +\d+ inference_feedback_manager\.cc:\d+\] Feedback manager requires a model with a single"
+)
+
+
+class CliError(Exception):
+    """A user error: printed as one line, exit status 2."""
+
+
+def plain(text: str) -> str:
+    """``text`` without reST markup: ``x`` -> x, :func:`~a.b` -> b, :class:`a.X` -> a.X."""
+    text = re.sub(r":\w+:`(~?)([^`]+)`", lambda m: m.group(2).rsplit(".", 1)[-1] if m.group(1) else m.group(2), text)
+    return re.sub(r"``([^`]+)``", r"\1", text)
+
+
+class HelpFormatter(jsonargparse.DefaultHelpFormatter):
+    """jsonargparse's help as plain text (docstrings' reST markup removed), with a class type shown
+    by name (``Path``, not ``<class 'Path'>``)."""
+
+    def _get_type_str(self, action: argparse.Action) -> str | None:
+        hint = action.type if action.type is not None else getattr(action, "_typehint", None)
+        return hint.__name__ if isinstance(hint, type) else super()._get_type_str(action)
+
+    def _expand_help(self, action: argparse.Action) -> str:
+        return plain(super()._expand_help(action))
+
+    def _format_text(self, text: str) -> str:
+        return super()._format_text(plain(text))
+
+    def start_section(self, heading: str | None) -> None:
+        super().start_section(plain(heading) if heading else heading)
+
+
+class ArgumentParser(jsonargparse.ArgumentParser):
+    """jsonargparse's ArgumentParser, but ``--epoch`` is not taken for ``--epochs`` and a bad
+    argument raises :class:`argparse.ArgumentError` (``main()`` prints it as one line)."""
+
+    def __init__(self, *args, allow_abbrev: bool = False, exit_on_error: bool = False, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, allow_abbrev=allow_abbrev, exit_on_error=exit_on_error, **kwargs)
+
+
+def verbose_requested() -> bool:
+    """True when ``LIT_BOOT_VERBOSE`` is set to anything but ``""``/``0``."""
+    return os.environ.get("LIT_BOOT_VERBOSE", "") not in ("", "0")
+
+
+_verbose = False  # inside command_output(verbose=True): drop_native_noise keeps everything
+
+
+class _Stdout(logging.StreamHandler):
+    """A handler writing to the current ``sys.stdout`` (a redirect or pytest's capture included)."""
+
+    @property
+    def stream(self):
+        return sys.stdout
+
+    @stream.setter
+    def stream(self, value) -> None:
+        pass
+
+
+@contextmanager
+def command_output(verbose: bool = False) -> Iterator[None]:
+    """Within the block (one command): lit-boot's log records (``lit_boot.*``, INFO and up) go to
+    stdout as plain lines; unless ``verbose``, Lightning's info lines and :data:`KNOWN_WARNINGS`
+    are dropped and every other warning from Lightning or torch* shows once per message (not once
+    per stage). Restored after."""
+    global _verbose
+    ours = logging.getLogger("lit_boot")
+    handler = _Stdout()
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    loggers = [ours, *map(logging.getLogger, LIGHTNING_INFO_LOGGERS)]
+    levels = [logger.level for logger in loggers]
+    ours.addHandler(handler)
+    ours.setLevel(logging.DEBUG if verbose else logging.INFO)
+    was_verbose, _verbose = _verbose, verbose
+    with warnings.catch_warnings():
+        if not verbose:
+            for name in LIGHTNING_INFO_LOGGERS:  # children of Lightning's loggers: kept when it is imported
+                logging.getLogger(name).setLevel(logging.WARNING)
+            for category in (UserWarning, RuntimeWarning, FutureWarning):  # the ones Python shows by default
+                warnings.filterwarnings("once", category=category, module=r"(lightning|torch\w*)(\.|$)")
+            for message, category, module in KNOWN_WARNINGS:
+                warnings.filterwarnings("ignore", message=message, category=category, module=module)
+        try:
+            yield
+        finally:
+            _verbose = was_verbose
+            ours.removeHandler(handler)
+            for logger, level in zip(loggers, levels):
+                logger.setLevel(level)
+
+
+_PARSER_KEY = re.compile(r'Parser key "([^"]+)":\s*')
+_EXPECTED = re.compile(r"Expected a <class '(\w+)'>")
+_UNION = "Does not validate against any of the Union subtypes"
+
+
+def error_line(err: BaseException) -> str:
+    """``err`` as one line: jsonargparse's ``Parser key "x":`` as ``--x:``, its union reports as the
+    reasons that are not "expected None", no ``Namespace(...)`` dumps."""
+    text = str(err).strip()
+    if _UNION in text:
+        text = _union_reasons(text)
+    text = _PARSER_KEY.sub(lambda m: f"--{m.group(1)}: ", text)
+    text = re.sub(r"Key \"([^\"]+)\" is required but not included in config object or its value is None\.?",
+                  r"--\1 is required", text)  # fmt: skip
+    text = re.sub(r"Expected a <class '(\w+)'>\. Got value: (.+)$", r"expected \1, got '\2'", text, flags=re.M)
+    text = _EXPECTED.sub(r"expected \1", text)
+    return " ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
+def _union_reasons(text: str) -> str:
+    """A jsonargparse union report as its head (``Parser key "x":``) and the subtypes' reasons."""
+    head, _, rest = text.partition(_UNION)
+    key = match.group(1) if (match := _PARSER_KEY.search(head)) else None
+    errors = rest.partition("Errors:")[2].partition("Given value type:")[0]
+    indent = match.group(1) if (match := re.search(r"^([ \t]*)- ", errors, re.M)) else ""
+    items = [" ".join(item.split()) for item in re.split(rf"^{indent}- ", errors, flags=re.M) if item.strip()]
+    items = [item for item in items if item != "Expected a <class 'NoneType'>"]
+    expected = [match.group(1) for item in items if (match := _EXPECTED.fullmatch(item))]
+    real = [_class_problem(item, key) for item in items if not _EXPECTED.fullmatch(item)]
+    if real:  # a class's problem names its options in full (--data.scene): the head (--data) adds nothing
+        named = key is not None and any(item.startswith("Problem with given class_path") for item in items)
+        return ("" if named else head) + "; ".join(real)
+    got = match.group(1).strip() if (match := re.search(r"Given value: (.*)$", text, re.S)) else ""
+    return head + f"expected {' or '.join(expected)}" + (f", got {got!r}" if got else "") if expected else text
+
+
+def _class_problem(item: str, key: str | None) -> str:
+    """``Problem with given class_path 'C': <reason>`` as ``C: <reason>``, the options in the reason
+    named in full (``--data.scene``)."""
+    match = re.fullmatch(r"Problem with given class_path '([\w.]+)':\s*(.*)", item)
+    if match is None or key is None:
+        return item
+    cls, reason = match.groups()
+    reason = _PARSER_KEY.sub(lambda m: f"--{key}.{m.group(1)}: ", reason)
+    missing = re.fullmatch(r"the following arguments are required: (.+)", reason)
+    if missing:
+        names = [f"--{key}.{name.strip()}" for name in missing.group(1).split(",")]
+        reason = " and ".join(names) + (" is" if len(names) == 1 else " are") + " required"
+    return f"{cls}: {reason}"
+
+
+def is_user_error(err: BaseException) -> bool:
+    """Whether ``main()`` reports ``err`` as one line with exit status 2 (no traceback)."""
+    return isinstance(err, (CliError, argparse.ArgumentError, ValueError, OSError))
+
+
+@contextmanager
+def drop_native_noise(pattern: re.Pattern[str] = NATIVE_NOISE) -> Iterator[None]:
+    """Within the block, stderr (file descriptor 2, where native libraries write) goes through a
+    pipe; lines matching ``pattern`` are dropped, everything else is passed on as it comes.
+    Does nothing within ``command_output(verbose=True)``."""
+    if _verbose:
+        yield
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    read_end, write_end = os.pipe()
+    os.dup2(write_end, 2)
+    os.close(write_end)
+    thread = threading.Thread(target=_pass_on, args=(read_end, saved, pattern), daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        sys.stderr.flush()
+        os.dup2(saved, 2)  # closes the pipe's last write end: the thread reads to the end and stops
+        thread.join(timeout=10)
+        os.close(saved)
+
+
+def _pass_on(read_end: int, out: int, pattern: re.Pattern[str]) -> None:
+    """Copy lines (ending in \\n or \\r, so progress bars move) from ``read_end`` to ``out``, but
+    those matching ``pattern``."""
+    pending = b""
+    with os.fdopen(read_end, "rb", buffering=0) as pipe:
+        while chunk := pipe.read(65536):
+            pending += chunk
+            *lines, pending = re.split(rb"(?<=[\r\n])", pending)
+            for line in lines:
+                if not pattern.match(line.decode(errors="replace")):
+                    os.write(out, line)
+    if pending and not pattern.match(pending.decode(errors="replace")):
+        os.write(out, pending)
