@@ -10,9 +10,28 @@
 This is where lit_boot.flow and lit_boot.pose meet.
 """
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from .config import DRIFT_GUARDS, MODES, PRESETS, BootstrapConfig
-from .evaluate import agreement, drift, flow_metrics, pose_metrics, pose_points
-from .runner import Bootstrap, BootstrapResult, bootstrap
+
+if TYPE_CHECKING:
+    from .evaluate import agreement, drift, flow_metrics, pose_metrics, pose_points
+    from .runner import Bootstrap, BootstrapResult, bootstrap
+
+#: Names imported on first use: the runner pulls Lightning, and the CLI's help needs only the config.
+_LAZY = {**dict.fromkeys(["agreement", "drift", "flow_metrics", "pose_metrics", "pose_points"], ".evaluate"),
+         **dict.fromkeys(["Bootstrap", "BootstrapResult", "bootstrap"], ".runner")}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(_LAZY[name], __name__), name)
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
 
 __all__ = [
     "Bootstrap",
