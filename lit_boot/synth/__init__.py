@@ -3,13 +3,23 @@
 :func:`make_scene` renders a textured articulated body (procedural motions or a BVH file) in
 front of textured planes, seen by a perspective camera, and returns a
 :class:`lit_boot.core.Scene` with exact forward flow, occlusions, person masks, 3D/2D joints,
-and simulated METRO-like and DCPose-like estimates.
+and simulated METRO-like and DCPose-like estimates. The settings (:class:`SynthConfig`,
+:class:`EstimateConfig`) import without torch; the rest loads on first use.
 """
 
-from .bvh import BvhData, bvh_duration, bvh_motion, read_bvh
-from .estimates import EstimateConfig
-from .generator import SynthConfig, make_scene
-from .motions import MOTION_KINDS, procedural_motion, procedural_skeleton
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from .config import MOTION_KINDS, EstimateConfig, SynthConfig
+
+if TYPE_CHECKING:
+    from .bvh import BvhData, bvh_duration, bvh_motion, read_bvh
+    from .generator import make_scene
+    from .motions import procedural_motion, procedural_skeleton
+
+_LAZY = {**dict.fromkeys(["BvhData", "bvh_duration", "bvh_motion", "read_bvh"], ".bvh"),
+         "make_scene": ".generator",
+         **dict.fromkeys(["procedural_motion", "procedural_skeleton"], ".motions")}  # fmt: skip
 
 __all__ = [
     "BvhData",
@@ -23,3 +33,13 @@ __all__ = [
     "procedural_motion",
     "procedural_skeleton",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(_LAZY[name], __name__), name)
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

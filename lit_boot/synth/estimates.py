@@ -12,12 +12,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import torch
 
 from ..core.cameras import Cameras, fit_weak_perspective
 from ..core.joints import LSP14
+from .config import EstimateConfig
 
 __all__ = ["EstimateConfig", "simulate_metro", "simulate_keypoints"]
 
@@ -26,47 +25,6 @@ _LOCK_GROUPS = (
     tuple(range(17)),  # the whole body jumps to another person
     (5, 7, 9), (6, 8, 10), (11, 13, 15), (12, 14, 16), (0, 1, 2, 3, 4),
 )  # fmt: skip
-
-
-@dataclass
-class EstimateConfig:
-    """Error model of the simulated estimators. Pixel settings are for a person 256 px tall
-    and scale with the person's height in the image.
-
-    Args:
-        mpjpe_mm: root-aligned MPJPE of the METRO-like 3D joints, mm (exact).
-        bias_share: share of the 3D error variance that is a constant per-joint bias (the
-            rest is per-frame jitter).
-        gross_error_prob: chance per joint and frame of a gross 3D error (4x the jitter).
-        camera_noise_px: 2D noise seen by the weak-perspective camera fit.
-        keypoint_noise_px: 2D keypoint noise of visible joints.
-        occluded_noise_px: 2D keypoint noise of hidden joints.
-        visible_conf: confidence range of visible joints.
-        occluded_conf: confidence range of hidden joints.
-        miss_prob: chance per joint and frame of a missed detection (confidence 0).
-        jump_prob: chance per joint and frame of a jump (one frame, far away, confident).
-        jump_px: jump distance range.
-        lock_prob: chance per frame that a joint group locks onto a wrong place.
-        lock_frames: lock duration range, frames.
-        lock_px: distance of the wrong place.
-        failure_conf: confidence range of jumps and locks.
-    """
-
-    mpjpe_mm: float = 70.0
-    bias_share: float = 0.6
-    gross_error_prob: float = 0.02
-    camera_noise_px: float = 1.5
-    keypoint_noise_px: float = 2.0
-    occluded_noise_px: float = 6.0
-    visible_conf: tuple[float, float] = (0.75, 0.98)
-    occluded_conf: tuple[float, float] = (0.1, 0.5)
-    miss_prob: float = 0.03
-    jump_prob: float = 0.01
-    jump_px: tuple[float, float] = (25.0, 60.0)
-    lock_prob: float = 0.04
-    lock_frames: tuple[int, int] = (2, 5)
-    lock_px: tuple[float, float] = (30.0, 80.0)
-    failure_conf: tuple[float, float] = (0.7, 0.95)
 
 
 def _uniform(lo_hi: tuple[float, float], shape: tuple[int, ...], g: torch.Generator) -> torch.Tensor:

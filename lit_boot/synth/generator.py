@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import torch
@@ -23,85 +23,15 @@ from .appearance import Appearance
 from .body import Body, PartPoses
 from .bvh import bvh_motion
 from .camera_rig import CameraRig, frame_person
-from .estimates import EstimateConfig, simulate_keypoints, simulate_metro
-from .motions import MOTION_KINDS, procedural_motion, procedural_skeleton
+from .config import MOTION_KINDS, EstimateConfig, SynthConfig
+from .estimates import simulate_keypoints, simulate_metro
+from .motions import procedural_motion, procedural_skeleton
 from .render import Hits, cast
 from .skeleton import Motion, axis_angle_to_matrix
 
 __all__ = ["SynthConfig", "make_scene"]
 
 _LOCOMOTION = ("walk", "run", "bvh")
-
-
-@dataclass
-class SynthConfig:
-    """Everything that defines a synthetic scene; the same config gives the same scene bit
-    for bit.
-
-    Args:
-        motion: walk, run, wave, jump, turn, or bvh (then give --bvh).
-        frames: number of frames T.
-        height: image height in pixels.
-        width: image width in pixels.
-        fps: frames per second.
-        seed: seed of everything random (motion variations, textures, estimates).
-        speed: procedural motion speed factor (cycle rate and travel speed).
-        amplitude: procedural motion amplitude factor (joint angle swings).
-        heading_deg: the direction the body faces or travels: 0 away from the camera, 90
-            towards image left, 180 towards the camera; default: 90 for walk/run/bvh, 160
-            otherwise.
-        bvh: path of a BVH file (CMU naming, e.g. ../shared/data/mocap/cmu_131/131_01.bvh).
-        bvh_start: start time in the BVH file, seconds.
-        body_height_mm: body height in millimetres.
-        girth: factor on every limb's thickness.
-        fov_deg: horizontal field of view of the camera, degrees.
-        fill: fraction of the image height the person fills.
-        camera_height_mm: camera height above the floor (default: 55% of the person's extent).
-        pan_deg_per_s: camera pan rate (yaw), degrees per second.
-        dolly_mm_per_s: camera dolly speed along its initial viewing direction, mm per second.
-        noise_std: Gaussian image noise, grey levels (0-255).
-        motion_blur: samples per frame over the shutter interval (0 or 1: no blur).
-        shutter: fraction of the frame interval the shutter is open (motion blur).
-        name: scene name (default: synth_<motion>_s<seed>).
-        estimates: error model of the simulated METRO-like and DCPose-like estimates.
-    """
-
-    motion: str = "walk"
-    frames: int = 24
-    height: int = 256
-    width: int = 256
-    fps: float = 30.0
-    seed: int = 0
-    speed: float = 1.0
-    amplitude: float = 1.0
-    heading_deg: float | None = None
-    bvh: str | None = None
-    bvh_start: float = 0.0
-    body_height_mm: float = 1700.0
-    girth: float = 1.0
-    fov_deg: float = 55.0
-    fill: float = 0.7
-    camera_height_mm: float | None = None
-    pan_deg_per_s: float = 0.0
-    dolly_mm_per_s: float = 0.0
-    noise_std: float = 0.0
-    motion_blur: int = 0
-    shutter: float = 0.5
-    name: str | None = None
-    estimates: EstimateConfig = field(default_factory=EstimateConfig)
-
-    def __post_init__(self) -> None:
-        kinds = (*MOTION_KINDS, "bvh")
-        if self.motion not in kinds:
-            raise ValueError(f"SynthConfig.motion: expected one of {kinds}, got {self.motion!r}")
-        if self.motion == "bvh" and not self.bvh:
-            raise ValueError("SynthConfig.bvh: motion 'bvh' needs the path of a BVH file")
-        if self.frames < 2:
-            raise ValueError(f"SynthConfig.frames: expected at least 2 frames, got {self.frames}")
-        if self.height < 16 or self.width < 16:
-            raise ValueError(f"SynthConfig.height/width: expected at least 16 px, got {self.height}x{self.width}")
-        if self.fps <= 0:
-            raise ValueError(f"SynthConfig.fps: expected a positive rate, got {self.fps}")
 
 
 def _motion(cfg: SynthConfig, times: torch.Tensor) -> Motion:

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 import torch
 
 from lit_boot.synth.bvh import rest_height
+from lit_boot.synth.config import MOTION_KINDS
 from lit_boot.synth.skeleton import Motion, Skeleton, axis_angle_to_matrix, forward_kinematics
 
 __all__ = ["MOTION_KINDS", "procedural_skeleton", "procedural_motion"]
 
-MOTION_KINDS = ("walk", "run", "wave", "jump", "turn")
 
 _SIDES = (("left", 1.0), ("right", -1.0))
 _ROTATED = (
