@@ -2,7 +2,9 @@
 
 A run folder (the input scene folder is never written)::
 
-    config.json            the run's settings (a rerun with other settings is refused)
+    config.json            the run's settings (a rerun with other settings is refused once a
+                           stage has finished; before that it replaces the run)
+    .lock                  the lock one run at a time holds (pid and host of the last holder)
     stages/<stage>/        initial, flow_1, pose_1, flow_2, ...: each stage's flows.npz,
                            fine-tuned RAFT weights (raft_<member>.pt) or refined poses, and
                            stage.json, written last: a stage with stage.json is done, and a
@@ -13,14 +15,21 @@ A run folder (the input scene folder is never written)::
     summary.json           settings, device, every metric per stage, timings, guard events
     metrics.png            the metrics per stage; overlay.mp4: frame | flows | skeletons
     logs/tensorboard/, logs/csv/   per stage (training curves) and "summary" (per stage)
+
+Faults. Every file is written atomically and a stage's stage.json last, so a run killed at any
+point (SIGKILL included) resumes to the same result as an uninterrupted run; leftovers of
+interrupted writes are deleted on resume. A stage whose training meets a non-finite loss,
+gradient or weight (:class:`~lit_boot.finite.FiniteGuard`), or whose output is not finite, is
+rolled back: its output is discarded, the previous stage's flows, poses and weights are kept
+(the final outputs are theirs), the stage's record in summary.json says ``rolled_back`` with a
+``guard`` event ``{"guard": "finite", "what": ..., "step": ...}``, and the run stops, as the
+drift guard's ``rollback`` does (a rerun reprints it; ``overwrite`` tries again).
 """
 
 from __future__ import annotations
 
 import io
-import json
 import os
-import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,18 +43,19 @@ from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 from ..core import Scene
 from ..data import load_scene
 from ..data.atomic import atomic_write_bytes
-from ..flow import FlowTTT, write_flows, write_flows_npz
+from ..finite import NonFiniteError
+from ..flow import FlowTTT, write_flows_npz
 from ..pose import PoseResult, load_pose_result
 from .config import BootstrapConfig
+from .dashboard import log_stage_images, stage_header
 from .ensemble import average_poses
 from .evaluate import agreement, drift, flow_metrics, pose_metrics, pose_points
-from .dashboard import log_stage_images, stage_header
+from .folder import STAGE_JSON, RunFolder
+from .lock import RunLock
 from .outputs import write_outputs
-from .stages import fine_tune_flow, make_flow_model, predict_flows, refine_poses_stage
+from .stages import fine_tune_flow, make_flow_model, make_refiner, predict_flows, refine_poses_stage
 
-__all__ = ["Bootstrap", "BootstrapResult", "bootstrap"]
-
-STAGE_JSON = "stage.json"
+__all__ = ["Bootstrap", "BootstrapResult", "bootstrap", "STAGE_JSON"]
 
 
 @dataclass
@@ -97,13 +107,37 @@ def _load_flows(path: Path) -> torch.Tensor:
         return torch.from_numpy(np.array(data["flow"]))
 
 
+@dataclass
+class _RunState:
+    """What a run carries from stage to stage: the current scene (its estimates the latest
+    poses), flows (T-1, 2, H, W) px and PoseResult, the records so far, and the run's fixed
+    facts."""
+
+    scene: Scene
+    initial_scene: Scene
+    person_px: float
+    accelerator: str
+    precision: str
+    loggers: list
+    initial: torch.Tensor | None = None
+    flows: torch.Tensor | None = None
+    result: PoseResult | None = None
+    history: list[dict[str, Any]] = field(default_factory=list)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
 class Bootstrap:
     """Run the method on one scene (a folder, or a Scene) into ``out`` (default
     ``runs/<scene name>/bootstrap``).
 
-    Settings: a :class:`BootstrapConfig`, or its fields as keyword arguments. ``overwrite``
-    deletes an existing run folder first; otherwise an interrupted run with the same settings
-    resumes after its last finished stage, and one with other settings is refused.
+    Settings: a :class:`BootstrapConfig`, or its fields as keyword arguments. A missing or
+    unfit scene, missing or bad weights and bad settings fail before the run folder is
+    touched. ``overwrite`` clears a run found in ``out`` first; otherwise an interrupted run
+    with the same settings resumes after its last finished stage, one with other settings is
+    replaced if it finished no stage and refused if it did. A folder holding anything but a
+    lit-boot run is never written, and a folder another run is writing into is refused
+    (:class:`~lit_boot.bootstrap.lock.RunLockedError`). A stage that meets a non-finite value
+    is rolled back and the run stops (see the module doc).
     """
 
     def __init__(
@@ -122,42 +156,46 @@ class Bootstrap:
         name = scene.name if isinstance(scene, Scene) else Path(scene).name
         self.out = Path(out) if out is not None else Path("runs") / name / "bootstrap"
         self.overwrite = overwrite
-        self.models: list[FlowTTT | None] = []
+        self.folder = RunFolder(self.out, overwrite)
+        self.models: list[FlowTTT] = []
         self.pending_weights: list[Path | None] = []
 
-    # --- the run folder ----------------------------------------------------------------------------
+    # --- inputs and settings: checked before anything is written ----------------------------------
     def _settings(self) -> dict[str, Any]:
         scene = str(self.scene_arg) if not isinstance(self.scene_arg, Scene) else f"<Scene {self.scene_arg.name}>"
         return {"scene": scene, "config": self.config.to_dict()}
 
-    def _prepare_folder(self) -> None:
-        settings = json.loads(json.dumps(self._settings(), default=str))
-        path = self.out / "config.json"
-        if self.out.exists() and self.overwrite:
-            shutil.rmtree(self.out)
-        if path.is_file():
-            old = json.loads(path.read_text())
-            if old != settings:
-                diff = sorted(k for k in set(old["config"]) | set(settings["config"])
-                              if old["config"].get(k) != settings["config"].get(k))  # fmt: skip
-                where = diff or ["scene"]
-                raise ValueError(
-                    f"{self.out}: holds a run with other settings ({', '.join(where)} differ); "
-                    "pass overwrite=True (--overwrite true) or choose another output folder"
-                )
-        elif self.out.exists() and any(self.out.iterdir()):
-            raise FileExistsError(f"{self.out}: exists, is not empty and holds no lit-boot run (choose another folder)")
-        self.out.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(path, (json.dumps(settings, indent=2) + "\n").encode())
+    def _inputs(self) -> Scene:
+        """The scene (loaded, checked for the mode) with the pose ensemble averaged in."""
+        cfg = self.config
+        scene = self.scene if self.scene is not None else load_scene(self.scene_arg)
+        if scene.num_frames < 2:
+            raise ValueError(f"scene {scene.name!r}: needs at least 2 frames, has {scene.num_frames}")
+        if cfg.mode == "3d" and (scene.joints3d is None or scene.cameras is None):
+            raise ValueError(f"scene {scene.name!r}: 3D mode needs 3D joints with cameras (use mode '2d')")
+        if cfg.mode == "2d" and scene.keypoints2d is None:
+            raise ValueError(f"scene {scene.name!r}: 2D mode needs 2D keypoints")
+        return average_poses(scene, cfg.pose_ensemble, cfg.mode)
 
-    def _stage_dir(self, name: str) -> Path:
-        return self.out / "stages" / name
+    def _build(self, person_px: float) -> None:
+        """Build every ensemble member (loading its weights: missing, unreadable, unfit or
+        non-finite weights raise) and a refiner from the settings (bad arguments raise)."""
+        cfg = self.config
+        self.models = [make_flow_model(cfg.flow_kwargs(m, person_px)) for m in range(1 + len(cfg.flow_ensemble))]
+        self.pending_weights = [None] * len(self.models)
+        for m, model in enumerate(self.models):
+            if not all(torch.isfinite(t).all() for t in model.raft.state_dict().values() if t.is_floating_point()):
+                raise ValueError(f"RAFT weights {cfg.flow_kwargs(m).get('weights')}: hold NaN or infinite values")
+        make_refiner(cfg.mode, cfg.pose_kwargs())
 
+    # --- logging and devices -------------------------------------------------------------------------
     def _loggers(self, version: str) -> list:
+        """Fresh TensorBoard and CSV loggers for ``version`` (an interrupted attempt's logs go)."""
+        self.folder.clear_logs(version)
         root = self.out / "logs"
-        return [TensorBoardLogger(root, name="tensorboard", version=version), CSVLogger(root, name="csv", version=version)]
+        return [TensorBoardLogger(root, name="tensorboard", version=version),
+                CSVLogger(root, name="csv", version=version)]
 
-    # --- devices ---------------------------------------------------------------------------------
     def _accelerator(self) -> str:
         acc = self.config.accelerator
         return ("cuda" if torch.cuda.is_available() else "cpu") if acc == "auto" else acc
@@ -169,168 +207,205 @@ class Bootstrap:
 
     # --- flow networks ----------------------------------------------------------------------------
     def _model(self, member: int, person_px: float, fresh: bool = False) -> FlowTTT:
-        """Ensemble member ``member``: pretrained when new or ``fresh``, else as last tuned."""
-        if fresh or self.models[member] is None:
-            model = make_flow_model(self.config.flow_kwargs(member, person_px))
-            pending = self.pending_weights[member]
-            if pending is not None and not fresh:
-                model.raft.load_state_dict(torch.load(pending, map_location="cpu", weights_only=True))
-            self.models[member] = model
+        """Ensemble member ``member``: pretrained if ``fresh``, else as last tuned (loaded from
+        a finished stage's weights on a resumed run)."""
+        if fresh:
+            self.models[member] = make_flow_model(self.config.flow_kwargs(member, person_px))
+            self.pending_weights[member] = None
+        pending = self.pending_weights[member]
+        if pending is not None:
+            self.models[member].raft.load_state_dict(torch.load(pending, map_location="cpu", weights_only=True))
             self.pending_weights[member] = None
         return self.models[member]
 
     # --- the stages --------------------------------------------------------------------------------
-    def _flow_stage(
-        self, name: str, scene: Scene, initial: torch.Tensor, person_px: float, accelerator: str, precision: str
-    ) -> tuple[dict[str, Any], torch.Tensor]:
-        """Fine-tune every ensemble member on the stick-man of ``scene``'s poses; the record
+    def _flow_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], torch.Tensor]:
+        """Fine-tune every ensemble member on the stick-man of the current poses; the record
         and the members' mean flow (T-1, 2, H, W) px."""
         cfg, n = self.config, len(self.models)
+        what = f"FlowTTT x{n}, {cfg.epochs} epochs, {st.precision} on {st.accelerator}"
+        print(stage_header(index, len(cfg.stages()), name, what), flush=True)
         flows, reports = [], []
         for m in range(n):
-            model = self._model(m, person_px, fresh=cfg.restart_flow)
+            model = self._model(m, st.person_px, fresh=cfg.restart_flow)
             loggers = self._loggers(name + (f"_m{m}" if n > 1 else ""))
-            reports.append(fine_tune_flow(model, scene, cfg.mode, cfg.epochs, accelerator, precision, loggers, cfg.progress_bar))
-            flows.append(predict_flows(model, scene, accelerator, precision))
+            reports.append(fine_tune_flow(model, st.scene, cfg.mode, cfg.epochs, st.accelerator, st.precision, loggers,
+                                          cfg.progress_bar))  # fmt: skip
+            flows.append(predict_flows(model, st.scene, st.accelerator, st.precision))
         mean = torch.stack(flows).mean(0)
         person = self.models[0].person_region(self.models[0].sketch_masks)
-        record = {**flow_metrics(scene, mean), "drift_px": drift(mean, initial, person),
-                  "agreement_px": agreement(mean, *pose_points(scene, cfg.mode)),
+        record = {**flow_metrics(st.scene, mean), "drift_px": drift(mean, st.initial, person),
+                  "agreement_px": agreement(mean, *pose_points(st.scene, cfg.mode)),
                   "info": {"target": reports[0], "sketch": self.models[0].hparams["sketch"]}}  # fmt: skip
         return record, mean
 
-    def _pose_stage(self, name: str, scene: Scene, flows: torch.Tensor) -> tuple[dict[str, Any], PoseResult]:
-        """Refine ``scene``'s poses against ``flows``; the record and the result."""
+    def _pose_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], PoseResult]:
+        """Refine the current poses against the current flows; the record and the result."""
         cfg = self.config
-        result = refine_poses_stage(scene, flows, cfg.mode, cfg.pose_kwargs(), cfg.pose_steps, cfg.early_stop,
+        refiner = "PoseRefiner" if cfg.mode == "3d" else "KeypointRefiner"
+        what = f"{refiner}, {cfg.pose_steps} steps on {cfg.pose_accelerator}"
+        print(stage_header(index, len(cfg.stages()), name, what), flush=True)
+        result = refine_poses_stage(st.scene, st.flows, cfg.mode, cfg.pose_kwargs(), cfg.pose_steps, cfg.early_stop,
                                     cfg.pose_accelerator, self._loggers(name), cfg.progress_bar)  # fmt: skip
-        refined = result.apply_to(scene)
-        record = {**pose_metrics(refined, cfg.mode), "agreement_px": agreement(flows, *pose_points(refined, cfg.mode)),
-                  "info": {"steps": result.steps, "stopped_early": result.stopped_early, "loss": result.loss}}  # fmt: skip
+        refined = result.apply_to(st.scene)
+        record = {**pose_metrics(refined, cfg.mode),
+                  "agreement_px": agreement(st.flows, *pose_points(refined, cfg.mode)),
+                  "info": {"steps": result.steps, "stopped_early": result.stopped_early,
+                           "loss": result.loss}}  # fmt: skip
         return record, result
+
+    def _initial_stage(self, st: _RunState) -> None:
+        """Pretrained RAFT's flow (the members' mean) and the initial poses' metrics: loaded if
+        done, else computed and saved."""
+        cfg, folder = self.config, self.folder.stage_dir("initial")
+        record = self.folder.record("initial")
+        if record is not None:
+            st.initial = _load_flows(folder / "flows.npz")
+        else:
+            n = len(self.models)
+            print(stage_header(0, len(cfg.stages()), "initial", f"RAFT inference x{n} on {st.accelerator}"), flush=True)
+            start = time.perf_counter()
+            try:
+                flows = [predict_flows(self._model(m, st.person_px), st.scene, st.accelerator, st.precision)
+                         for m in range(n)]  # fmt: skip
+            except NonFiniteError as err:
+                raise NonFiniteError(f"{self.out}: pretrained RAFT's flow is not finite at precision {st.precision} "
+                                     "(try precision 32-true)", err.fault) from None  # fmt: skip
+            st.initial = torch.stack(flows).mean(0)
+            record = {"stage": "initial", "kind": "initial", "cycle": 0, **flow_metrics(st.scene, st.initial),
+                      **pose_metrics(st.scene, cfg.mode),
+                      "agreement_px": agreement(st.initial, *pose_points(st.scene, cfg.mode)),
+                      "info": {"seconds": time.perf_counter() - start, "person_px": st.person_px}}  # fmt: skip
+            folder.mkdir(parents=True, exist_ok=True)
+            write_flows_npz(folder / "flows.npz", st.initial)
+            self.folder.write_record("initial", record)
+        st.flows = st.initial
+        st.history.append(record)
+        st.seconds["initial"] = record["info"]["seconds"]
+        log_stage_images(st.loggers, 0, "initial", st.scene, st.initial, cfg.mode)
+
+    def _load_stage(self, st: _RunState, index: int, name: str, record: dict[str, Any]) -> bool:
+        """Take a finished stage's results; False if the run stopped there."""
+        st.history.append(record)
+        if record.get("rolled_back"):
+            return False
+        folder = self.folder.stage_dir(name)
+        if record["kind"] == "flow":
+            st.flows = _load_flows(folder / "flows.npz")
+            self.pending_weights = [folder / f"raft_{m}.pt" for m in range(len(self.models))]
+        else:
+            st.result = load_pose_result(folder)
+            st.scene = st.result.apply_to(st.scene)
+        st.seconds[name] = record["info"]["seconds"]
+        log_stage_images(st.loggers, index, name, st.scene, st.flows, self.config.mode)
+        return "guard" not in record  # the drift guard stopped the run here
+
+    def _run_stage(self, st: _RunState, index: int, name: str) -> bool:
+        """Run a stage; save its results, stage.json last; False if the run stops here."""
+        cfg = self.config
+        kind, cycle = name.split("_")[0], int(name.split("_")[1])
+        head = {"stage": name, "kind": kind, "cycle": cycle}
+        L.seed_everything(cfg.seed + index, verbose=False)
+        start = time.perf_counter()
+        try:
+            if kind == "flow":
+                record, flows = self._flow_stage(name, index, st)
+                scene, result = st.scene, st.result
+            else:
+                record, result = self._pose_stage(name, index, st)
+                scene, flows = result.apply_to(st.scene), st.flows
+        except NonFiniteError as err:
+            return self._roll_back(st, head, start, err)
+        record = {**head, **record}
+        record["info"]["seconds"] = time.perf_counter() - start
+        guard = self._drift_guard(record, st.history[-1]["agreement_px"])
+        if guard is not None:
+            record["guard"] = guard
+            if guard["action"] == "rollback":
+                record["rolled_back"] = True
+                self.folder.write_record(name, record)
+                st.history.append(record)
+                before, after = guard["agreement_before"], guard["agreement_after"]
+                print(f"  drift guard: flow-pose agreement {before:.3f} -> {after:.3f} px; "
+                      f"{name} rolled back, run stopped", flush=True)  # fmt: skip
+                return False
+        self._save_stage(name, kind, flows, result)
+        self.folder.write_record(name, record)
+        st.flows, st.scene, st.result = flows, scene, result
+        st.history.append(record)
+        st.seconds[name] = record["info"]["seconds"]
+        log_stage_images(st.loggers, index, name, st.scene, st.flows, cfg.mode)
+        if guard is not None:
+            worse = guard["agreement_after"] - guard["agreement_before"]
+            print(f"  drift guard: flow-pose agreement worsened by {worse:.3f} px; run stopped", flush=True)
+            return False
+        return True
+
+    def _drift_guard(self, record: dict[str, Any], before: float) -> dict[str, Any] | None:
+        """The drift guard's event when the stage worsened the agreement beyond the tolerance."""
+        cfg = self.config
+        if cfg.drift_guard == "record" or not record["agreement_px"] - before > cfg.drift_tolerance:
+            return None
+        return {"guard": "drift", "agreement_before": before, "agreement_after": record["agreement_px"],
+                "action": cfg.drift_guard}  # fmt: skip
+
+    def _roll_back(self, st: _RunState, head: dict[str, Any], start: float, err: NonFiniteError) -> bool:
+        """Record a stage stopped by a non-finite value as rolled back (its output discarded,
+        the previous stage's kept); the run stops. Returns False."""
+        record = {**head, "rolled_back": True, "guard": {"guard": "finite", "action": "rollback", **err.fault},
+                  "info": {"seconds": time.perf_counter() - start, "error": str(err)}}  # fmt: skip
+        self.folder.write_record(head["stage"], record)
+        st.history.append(record)
+        print(f"  finite guard: {err}; {head['stage']} rolled back (its output discarded), run stopped", flush=True)
+        return False
+
+    def _save_stage(self, name: str, kind: str, flows: torch.Tensor, result: PoseResult | None) -> None:
+        """A finished stage's results (each file atomic): flows and weights, or the poses."""
+        folder = self.folder.stage_dir(name)
+        folder.mkdir(parents=True, exist_ok=True)
+        if kind == "flow":
+            write_flows_npz(folder / "flows.npz", flows)
+            for m, model in enumerate(self.models):
+                _save_tensor(folder / f"raft_{m}.pt", model.raft.state_dict())
+        else:
+            result.save(folder)
 
     # --- the run -----------------------------------------------------------------------------------
     def run(self) -> BootstrapResult:
         """Run (or resume) every stage; write the run's outputs; return the result."""
         cfg = self.config
-        scene = self.scene if self.scene is not None else load_scene(self.scene_arg)
-        if scene.num_frames < 2:
-            raise ValueError(f"scene {scene.name!r}: needs at least 2 frames, has {scene.num_frames}")
-        if cfg.mode == "3d" and (scene.joints3d is None or scene.cameras is None):
-            raise ValueError(f"scene {scene.name!r}: 3D mode needs 3D joints with cameras (use mode '2d')")
-        if cfg.mode == "2d" and scene.keypoints2d is None:
-            raise ValueError(f"scene {scene.name!r}: 2D mode needs 2D keypoints")
-        self._prepare_folder()
-        scene = average_poses(scene, cfg.pose_ensemble, cfg.mode)
-        initial_scene = scene
+        self.folder.check(self._settings())  # nothing is written before inputs and settings are known good
+        scene = self._inputs()
         L.seed_everything(cfg.seed, verbose=False)
-        points, keep = pose_points(scene, cfg.mode)
-        person_px = _person_height(points, keep)
-        n_members = 1 + len(cfg.flow_ensemble)
-        self.models, self.pending_weights = [None] * n_members, [None] * n_members
-        accelerator, precision = self._accelerator(), self._precision()
-        for kind in ("tensorboard", "csv"):  # rebuilt whole on every (resumed) run: no duplicates
-            shutil.rmtree(self.out / "logs" / kind / "summary", ignore_errors=True)
-        summary_loggers = self._loggers("summary")
-        stages = cfg.stages()
-        history: list[dict[str, Any]] = []
-        seconds: dict[str, float] = {}
-
-        # initial: pretrained RAFT's flow and the initial poses
-        initial_dir = self._stage_dir("initial")
-        if (initial_dir / STAGE_JSON).is_file():
-            initial = _load_flows(initial_dir / "flows.npz")
-            record = json.loads((initial_dir / STAGE_JSON).read_text())
-        else:
-            print(stage_header(0, len(stages), "initial", f"RAFT inference x{n_members} on {accelerator}"), flush=True)
-            start = time.perf_counter()
-            initial = torch.stack([
-                predict_flows(self._model(m, person_px), scene, accelerator, precision) for m in range(n_members)
-            ]).mean(0)  # fmt: skip
-            record = {"stage": "initial", "kind": "initial", "cycle": 0, **flow_metrics(scene, initial),
-                      **pose_metrics(scene, cfg.mode), "agreement_px": agreement(initial, points, keep),
-                      "info": {"seconds": time.perf_counter() - start, "person_px": person_px}}  # fmt: skip
-            initial_dir.mkdir(parents=True, exist_ok=True)
-            write_flows_npz(initial_dir / "flows.npz", initial)
-            atomic_write_bytes(initial_dir / STAGE_JSON, json.dumps(record, indent=2).encode())
-        history.append(record)
-        seconds["initial"] = record["info"]["seconds"]
-        log_stage_images(summary_loggers, 0, "initial", scene, initial, cfg.mode)
-
-        flows, result = initial, None
-        for index, name in enumerate(stages, start=1):
-            kind, cycle = name.split("_")[0], int(name.split("_")[1])
-            folder = self._stage_dir(name)
-            if (folder / STAGE_JSON).is_file():  # done before: load it
-                record = json.loads((folder / STAGE_JSON).read_text())
-                if record.get("rolled_back"):
-                    history.append(record)
-                    break
-                if kind == "flow":
-                    flows = _load_flows(folder / "flows.npz")
-                    self.pending_weights = [folder / f"raft_{m}.pt" for m in range(n_members)]
-                    self.models = [None] * n_members
+        person_px = _person_height(*pose_points(scene, cfg.mode))
+        self._build(person_px)
+        with RunLock(self.out):
+            self.folder.prepare(self._settings())
+            loggers = self._loggers("summary")  # rebuilt whole on every (resumed) run: no duplicates
+            st = _RunState(scene, scene, person_px, self._accelerator(), self._precision(), loggers)
+            self._initial_stage(st)
+            for index, name in enumerate(cfg.stages(), start=1):
+                record = self.folder.record(name)
+                if record is None:
+                    go_on = self._run_stage(st, index, name)
                 else:
-                    result = load_pose_result(folder)
-                    scene = result.apply_to(scene)
-                history.append(record)
-                seconds[name] = record["info"]["seconds"]
-                log_stage_images(summary_loggers, index, name, scene, flows, cfg.mode)
-                if "guard" in record:  # the drift guard stopped the run here
+                    go_on = self._load_stage(st, index, name, record)
+                if not go_on:
                     break
-                continue
-            L.seed_everything(cfg.seed + index, verbose=False)
-            start = time.perf_counter()
-            before_agreement = history[-1]["agreement_px"]
-            if kind == "flow":
-                what = f"FlowTTT x{n_members}, {cfg.epochs} epochs, {precision} on {accelerator}"
-                print(stage_header(index, len(stages), name, what), flush=True)
-                record, new_flows = self._flow_stage(name, scene, initial, person_px, accelerator, precision)
-                new_scene, new_result = scene, result
-            else:
-                what = f"{'PoseRefiner' if cfg.mode == '3d' else 'KeypointRefiner'}, {cfg.pose_steps} steps on {cfg.pose_accelerator}"
-                print(stage_header(index, len(stages), name, what), flush=True)
-                record, new_result = self._pose_stage(name, scene, flows)
-                new_scene, new_flows = new_result.apply_to(scene), flows
-            record = {"stage": name, "kind": kind, "cycle": cycle, **record}
-            record["info"]["seconds"] = time.perf_counter() - start
-            worse = record["agreement_px"] - before_agreement
-            stop = cfg.drift_guard != "record" and worse > cfg.drift_tolerance
-            if stop:
-                record["guard"] = {"agreement_before": before_agreement, "agreement_after": record["agreement_px"],
-                                   "action": cfg.drift_guard}  # fmt: skip
-            folder.mkdir(parents=True, exist_ok=True)
-            if stop and cfg.drift_guard == "rollback":
-                record["rolled_back"] = True
-                atomic_write_bytes(folder / STAGE_JSON, json.dumps(record, indent=2, default=str).encode())
-                history.append(record)
-                print(f"  drift guard: flow-pose agreement {before_agreement:.3f} -> {record['agreement_px']:.3f} px; "
-                      f"{name} rolled back, run stopped", flush=True)  # fmt: skip
-                break
-            if kind == "flow":
-                write_flows_npz(folder / "flows.npz", new_flows)
-                for m, model in enumerate(self.models):
-                    _save_tensor(folder / f"raft_{m}.pt", model.raft.state_dict())
-            else:
-                new_result.save(folder)
-            atomic_write_bytes(folder / STAGE_JSON, json.dumps(record, indent=2, default=str).encode())
-            flows, scene, result = new_flows, new_scene, new_result
-            history.append(record)
-            seconds[name] = record["info"]["seconds"]
-            log_stage_images(summary_loggers, index, name, scene, flows, cfg.mode)
-            if stop:
-                print(f"  drift guard: flow-pose agreement worsened by {worse:.3f} px; run stopped", flush=True)
-                break
+            return self._finish(st)
 
-        for i, record in enumerate(history):
+    def _finish(self, st: _RunState) -> BootstrapResult:
+        """Log the per-stage metrics to the summary loggers; write the run's outputs."""
+        for i, record in enumerate(st.history):
             metrics = {f"bootstrap/{k}": v for k, v in record.items() if isinstance(v, float) and k != "cycle"}
-            for logger in summary_loggers:
+            for logger in st.loggers:
                 logger.log_metrics(metrics, step=i)
-        for logger in summary_loggers:
+        for logger in st.loggers:
             logger.save()
-        guard_events = [{"stage": r["stage"], **r["guard"]} for r in history if "guard" in r]
-        out = BootstrapResult(self.out, scene, initial_scene, initial, flows, result, history, seconds)
-        write_outputs(out, self._settings(), guard_events, accelerator, precision, self.config)
+        guard_events = [{"stage": r["stage"], **r["guard"]} for r in st.history if "guard" in r]
+        out = BootstrapResult(self.out, st.scene, st.initial_scene, st.initial, st.flows, st.result, st.history,
+                              st.seconds)
+        write_outputs(out, self._settings(), guard_events, st.accelerator, st.precision, self.config)
         return out
 
 

@@ -5,6 +5,10 @@
 - :func:`fine_tune_flow`: FlowTTT on the stick-man drawn from the scene's current poses;
 - :func:`refine_poses_stage`: PoseRefiner (3D) or KeypointRefiner (2D) against a flow.
 
+A training stage that meets a non-finite loss, gradient or weight (see
+:class:`~lit_boot.finite.FiniteGuard`) raises :class:`~lit_boot.finite.NonFiniteError`, as does
+one whose output (flows, poses) is not finite: the runner then rolls the stage back.
+
 The flow and pose halves meet here and in the runner only.
 """
 
@@ -16,11 +20,13 @@ import lightning as L
 import torch
 
 from ..core import Scene
+from ..finite import NonFiniteError, finite_fault
 from ..flow import FlowTTT, SceneFlowData, SketchConfig
 from ..pose import KeypointRefiner, PoseData, PoseRefiner, PoseResult
 from ..pose.api import make_trainer
 
-__all__ = ["make_flow_model", "predict_flows", "fine_tune_flow", "refine_poses_stage", "pose_source"]
+__all__ = ["make_flow_model", "predict_flows", "fine_tune_flow", "refine_poses_stage", "pose_source", "require_finite",
+           "make_refiner"]
 
 
 def pose_source(mode: str) -> str:
@@ -34,6 +40,25 @@ def make_flow_model(kwargs: dict[str, Any]) -> FlowTTT:
     if isinstance(kwargs.get("sketch"), dict):
         kwargs["sketch"] = SketchConfig(**kwargs["sketch"])
     return FlowTTT(**kwargs)
+
+
+def make_refiner(mode: str, kwargs: dict[str, Any]) -> PoseRefiner | KeypointRefiner:
+    """The refiner of ``mode`` (3d: PoseRefiner, 2d: KeypointRefiner) that saves nothing itself."""
+    kwargs = {**kwargs, "save": False}
+    return PoseRefiner(**kwargs) if mode == "3d" else KeypointRefiner(**kwargs)
+
+
+def require_finite(what: str, *tensors: torch.Tensor | None) -> None:
+    """Raise :class:`NonFiniteError` if any of ``tensors`` (None skipped) holds a NaN or inf."""
+    for tensor in tensors:
+        if tensor is not None and not bool(torch.isfinite(tensor).all()):
+            raise NonFiniteError(f"non-finite {what}", {"what": what, "step": None, "good_steps": None, "value": None})
+
+
+def _raise_fault(trainer: L.Trainer, stage: str) -> None:
+    fault = finite_fault(trainer)
+    if fault is not None:
+        raise NonFiniteError(f"{stage}: non-finite {fault['what']} at step {fault['step']}", fault)
 
 
 def _flow_trainer(max_epochs: int, accelerator: str, precision: str, loggers: list, progress_bar: bool) -> L.Trainer:
@@ -51,7 +76,9 @@ def predict_flows(
     trainer = _flow_trainer(1, accelerator, precision, [], progress_bar)
     out = trainer.predict(model, datamodule=SceneFlowData(scene, shuffle=False))
     order = torch.cat([o["index"] for o in out]).argsort()
-    return torch.cat([o["flow"].float().cpu() for o in out])[order]
+    flows = torch.cat([o["flow"].float().cpu() for o in out])[order]
+    require_finite("flows", flows)
+    return flows
 
 
 def fine_tune_flow(
@@ -65,11 +92,13 @@ def fine_tune_flow(
     progress_bar: bool = True,
 ) -> dict[str, float]:
     """Fine-tune ``model`` in place on the stick-man from ``scene``'s current poses; returns
-    FlowTTT's target report (bones rejected by the guard, painted fraction, ...)."""
+    FlowTTT's target report (bones rejected by the guard, painted fraction, ...). A
+    non-finite value raises NonFiniteError (the model holds the last good step's weights)."""
     model.targets = model.sketch_masks = model.original = None  # rebuilt from these poses
     data = SceneFlowData(scene, pose_source=pose_source(mode))
     trainer = _flow_trainer(epochs, accelerator, precision, loggers, progress_bar)
     trainer.fit(model, datamodule=data)
+    _raise_fault(trainer, "FlowTTT")
     return dict(model.target_report)
 
 
@@ -84,12 +113,16 @@ def refine_poses_stage(
     loggers: list,
     progress_bar: bool = True,
 ) -> PoseResult:
-    """Refine ``scene``'s poses against ``flows`` (T-1, 2, H, W) px; returns the result."""
-    kwargs = {**kwargs, "save": False}
-    refiner = PoseRefiner(**kwargs) if mode == "3d" else KeypointRefiner(**kwargs)
+    """Refine ``scene``'s poses against ``flows`` (T-1, 2, H, W) px; returns the result. A
+    non-finite value raises NonFiniteError."""
+    refiner = make_refiner(mode, kwargs)
     trainer = make_trainer(
         steps, early_stop, logger=loggers or False, accelerator=accelerator, enable_progress_bar=progress_bar,
         log_every_n_steps=min(50, steps),
     )  # fmt: skip
     trainer.fit(refiner, datamodule=PoseData(scene, flows, steps=steps))
-    return refiner.result
+    _raise_fault(trainer, type(refiner).__name__)
+    result = refiner.result
+    cameras = None if result.cameras is None else result.cameras.params
+    require_finite("poses", result.joints3d, result.keypoints2d, cameras)
+    return result

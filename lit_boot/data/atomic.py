@@ -1,20 +1,26 @@
 """Atomic writes: a file or a folder appears under its final name complete, or not at all.
 
 Everything is first written beside the target (same folder, hence same file system) under a
-hidden temporary name ``.<name>.<random>.partial`` and then renamed into place. An
-interrupted write leaves at most such a temporary entry behind, never a half-written target.
+hidden temporary name ``.<name>.<random>.partial``, fsynced, and then renamed into place (a
+file's folder is fsynced too, so files persist in the order they were written). An interrupted
+write leaves at most such a temporary entry behind, never a half-written target;
+:func:`remove_partials` clears those from a folder whose writer is known to be gone.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import uuid
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_directory", "atomic_file", "atomic_write_bytes"]
+__all__ = ["atomic_directory", "atomic_file", "atomic_write_bytes", "remove_partials"]
+
+#: A temporary entry of an unfinished write (never a complete target: those have their own name).
+_PARTIAL = re.compile(r"^\..+\.[0-9a-f]{12}\.partial(\.[^.]*)?$")
 
 
 @contextmanager
@@ -32,6 +38,22 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    _fsync_dir(path.parent)
+
+
+def _fsync_dir(folder: Path) -> None:
+    """Make a rename in ``folder`` durable (so writes persist in the order they were made, also
+    across a power cut); a no-op where folders cannot be opened (Windows)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
@@ -48,6 +70,24 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 def _temp_name(path: Path, kind: str) -> Path:
     """A fresh hidden name beside ``path``: ``.<name>.<random>.<kind>``."""
     return path.parent / f".{path.name}.{uuid.uuid4().hex[:12]}.{kind}"
+
+
+def remove_partials(folder: str | os.PathLike) -> list[Path]:
+    """Delete, under ``folder`` (recursively), the temporary files and folders that interrupted
+    writes of this module left (``.<name>.<12 hex>.partial[.suffix]``); returns them. Only for a
+    folder no other process is writing into (e.g. one held by a lock). Folders moved aside by a
+    replacement (``.old``) are kept: one may be the only copy."""
+    removed = []
+    for root, dirs, files in os.walk(folder):
+        for name in [d for d in dirs if _PARTIAL.match(d)]:
+            shutil.rmtree(Path(root) / name, ignore_errors=True)
+            dirs.remove(name)
+            removed.append(Path(root) / name)
+        for name in files:
+            if _PARTIAL.match(name):
+                (Path(root) / name).unlink(missing_ok=True)
+                removed.append(Path(root) / name)
+    return removed
 
 
 def _is_empty_dir(path: Path) -> bool:

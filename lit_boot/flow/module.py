@@ -7,7 +7,8 @@ prediction towards the target with SmoothL1 (beta 1). Few epochs are the regular
 mode, 50 in 2D-only mode: the Trainer's ``max_epochs``). Validation predicts with
 ``predict_updates`` iterations and logs EPE (all pixels, person, at joints) when the scene has
 ground truth, and always the drift: how far the flow outside the person moved from the
-original network's prediction.
+original network's prediction. Training stops at the first non-finite loss, gradient or
+weight, with the weights of the last good step restored (:class:`~lit_boot.finite.FiniteGuard`).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import torch.nn.functional as F
 from kornia.morphology import dilation
 from lightning.pytorch.utilities import rank_zero_warn
 
+from ..finite import FiniteGuard
 from ..metrics import EndPointError, PointEndPointError
 from .raft import load_raft, predict_flow
 from .sketch import SketchConfig, sketch_from_layout, target_flow
@@ -224,6 +226,9 @@ class FlowTTT(L.LightningModule):
             loss = sum(losses) / len(idx)
         self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(idx))
         return loss
+
+    def configure_callbacks(self) -> list[L.Callback]:
+        return [FiniteGuard()]
 
     def configure_optimizers(self) -> torch.optim.Optimizer:
         params = [p for p in self.raft.parameters() if p.requires_grad]

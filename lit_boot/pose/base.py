@@ -7,9 +7,11 @@ whole video. Loss terms are logged every ``trainer.log_every_n_steps`` steps (Li
 ``self.log`` costs milliseconds per call: logging every step would dominate the run), the
 evaluation against ground truth before the first step, every ``eval_every_n_steps`` steps
 and after the last. At the end, :attr:`RefinerBase.result` holds a :class:`PoseResult`, also
-saved (poses.npz, poses.json) into the run folder. Validation (``trainer.validate``,
-``lit-boot validate``) evaluates the current poses without changing them: the initial estimates
-of a fresh refiner, the refined poses after fitting.
+saved (poses.npz, poses.json) into the run folder. A non-finite loss, gradient or variable
+stops the optimisation with the last finite variables restored
+(:class:`~lit_boot.finite.FiniteGuard`; the result's ``steps`` counts the steps kept).
+Validation (``trainer.validate``, ``lit-boot validate``) evaluates the current poses without
+changing them: the initial estimates of a fresh refiner, the refined poses after fitting.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from lightning.pytorch.callbacks import Callback
 from lightning.pytorch.trainer.states import TrainerFn
 
 from ..core import Scene
+from ..finite import FiniteGuard, finite_fault
 from .keypoints import CONFIDENCE_MODES
 from .losses import flow_residual, inside_image
 from .result import PoseResult
@@ -235,7 +238,7 @@ class RefinerBase(L.LightningModule):
     # --- hooks -----------------------------------------------------------------------------------
     def configure_callbacks(self) -> list[Callback]:
         n = self.hparams.num_threads
-        return [TorchThreads(n)] if n is not None else []
+        return ([TorchThreads(n)] if n is not None else []) + [FiniteGuard()]
 
     def on_fit_start(self) -> None:
         self._started = time.perf_counter()
@@ -254,6 +257,9 @@ class RefinerBase(L.LightningModule):
     def on_train_end(self) -> None:
         self.result = self.make_result()
         self.result.seconds = time.perf_counter() - self._started
+        fault = finite_fault(self.trainer)
+        if fault is not None:  # the variables are those of the last good step
+            self.result.steps = fault["good_steps"]
         if self.hparams.save:
             self.result.save(self.output_folder())
 
