@@ -2,6 +2,17 @@
 flow, and FlowTTT, which fine-tunes RAFT per scene on it. Never imports lit_boot.pose."""
 
 from .data import POSE_SOURCES, SceneFlowData, ScenePairs, SketchInputs, sketch_inputs
+from .evidence import (
+    Evidence,
+    census_error,
+    forward_backward_check,
+    pair_evidence,
+    photometric_error,
+    region_mean,
+    ssim_error,
+    tile_mean,
+    warp,
+)
 from .module import FlowTTT
 from .raft import load_raft, pad_to_multiple, predict_flow, prepare_pair
 from .sketch import FOOTPRINTS, SketchConfig, SketchResult, footprint_offsets, sketch_flow, sketch_from_layout, target_flow
@@ -14,6 +25,15 @@ __all__ = [
     "ScenePairs",
     "SketchInputs",
     "sketch_inputs",
+    "Evidence",
+    "census_error",
+    "forward_backward_check",
+    "pair_evidence",
+    "photometric_error",
+    "region_mean",
+    "ssim_error",
+    "tile_mean",
+    "warp",
     "FlowTTT",
     "load_raft",
     "pad_to_multiple",
