@@ -3,9 +3,7 @@
 Each row runs the lit-boot command a user would run on that input, in process: exit status 2,
 one line on stderr naming the file or argument and what was expected, no traceback, and nothing
 written or changed (every file under the test's folder, the working directory included, is
-snapshotted by content and mtime before and after). A row whose command still leaves something
-behind because of code in another part of lit-boot says so in ``leaves``: it asserts the rest,
-then xfails; once that is fixed, the row fails until the note is removed.
+snapshotted by content and mtime before and after).
 """
 
 from __future__ import annotations
@@ -147,14 +145,11 @@ def _other_settings(src: Path) -> str:
 class Row:
     """One bad input: ``build(src, out, monkeypatch)`` makes it and returns the command line;
     ``expect``: regular expressions the error line must match; ``shared``: the build takes the
-    shared folder too (real weights). Known gaps in code outside this issue's layers:
-    ``leaves`` (what stays behind), ``broken`` (the row fails: a strict xfail)."""
+    shared folder too (real weights)."""
 
     build: Callable[..., list[str]]
     expect: tuple[str, ...]
-    leaves: str | None = None
     shared: bool = False
-    broken: str | None = None
 
 
 def _missing_scene(src: Path, out: Path, mp: pytest.MonkeyPatch) -> list[str]:
@@ -227,7 +222,6 @@ def _low_memory_scene(src: Path, out: Path, mp: pytest.MonkeyPatch) -> list[str]
     return _bootstrap(src / "scene", out / "run")
 
 
-LOCK_LEFT = "lit_boot/bootstrap/runner.py + lock.py leave the run's lock file in a run folder they refused"
 SINTEL = r"sintel/training/flow/walk/frame_0002\.flo: "
 ROWS = {
     "missing-scene-folder": Row(_missing_scene, (r"in/nope: no such scene folder",)),
@@ -267,12 +261,11 @@ ROWS = {
     "too-little-memory-scene-folder": Row(_low_memory_scene, (r"in/scene: 3 frames of 64x48 px need about",)),
     "run-folder-other-settings": Row(lambda s, o, m, sh: _run_folder(s, o, _other_settings(s), sh),
                                      (r"out/run: holds a run with other settings \(cycles.* differ\)",),
-                                     leaves=LOCK_LEFT, shared=True),
+                                     shared=True),
     "run-folder-corrupt-config": Row(lambda s, o, m, sh: _run_folder(s, o, "{not json", sh),
-                                     (r"out/run: holds a run with other settings",), leaves=LOCK_LEFT, shared=True),
+                                     (r"out/run: holds a run with other settings",), shared=True),
     "run-folder-config-not-an-object": Row(lambda s, o, m, sh: _run_folder(s, o, "[1, 2]", sh),
-                                           (r"out/run/config\.json",), shared=True, broken=(
-        "lit_boot/bootstrap/folder.py: a config.json holding a JSON list ends in AttributeError (traceback)")),
+                                           (r"out/run/config\.json",), shared=True),
 }
 
 
@@ -282,13 +275,7 @@ def snapshot(root: Path) -> dict[str, tuple[str, int] | None]:
             p.stat().st_mtime_ns) for p in sorted(root.rglob("*"))}  # fmt: skip
 
 
-def _params() -> list:
-    """The rows' names; a ``broken`` row is a strict xfail."""
-    return [pytest.param(n, marks=[pytest.mark.xfail(strict=True, reason=r.broken)] if r.broken else [])
-            for n, r in ROWS.items()]  # fmt: skip
-
-
-@pytest.mark.parametrize("name", _params())
+@pytest.mark.parametrize("name", list(ROWS))
 def test_bad_input(name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys, request) -> None:
     row = ROWS[name]
     src, out = tmp_path / "in", tmp_path / "out"
@@ -308,9 +295,6 @@ def test_bad_input(name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, c
     after = snapshot(tmp_path)
     assert {k: after.get(k) for k in before} == before, "an input changed"
     new = sorted(set(after) - set(before))
-    if row.leaves:
-        assert new, f"fixed? remove the note: {row.leaves}"
-        pytest.xfail(f"{new} left behind: {row.leaves}")
     assert not new, f"written: {new}"
 
 
