@@ -132,8 +132,12 @@ def bootstrap(argv: list[str]) -> int:
 def _demo_parser() -> ArgumentParser:
     parser = ArgumentParser(prog="lit-boot demo", description=(
         "Make a synthetic scene with exact ground truth, bootstrap it (flow -> pose -> flow) with RAFT-small "
-        "weights found in checkpoints/ (or downloaded), and print EPE and MPJPE before and after."))  # fmt: skip
-    parser.add_argument("--out", type=Path, default=Path("runs/demo"), help="folder for the scene and the run")
+        "weights found in checkpoints/ (or downloaded), and print EPE and MPJPE before and after. "
+        "--quick: 2 epochs per flow stage instead of 8 (about a minute on a 2-core CPU)."))  # fmt: skip
+    parser.add_argument("--quick", type=bool, nargs="?", const=True, default=False,
+                        help="the same scene, 2 epochs per flow stage, into runs/demo_quick")  # fmt: skip
+    parser.add_argument("--out", type=Path | None, default=None,
+                        help="folder for the scene and the run (default runs/demo, runs/demo_quick)")  # fmt: skip
     parser.add_argument("--motion", type=str, default="run", help="walk, run, wave, jump, turn")
     parser.add_argument("--frames", type=int, default=8)
     parser.add_argument("--height", type=int, default=128)
@@ -141,27 +145,39 @@ def _demo_parser() -> ArgumentParser:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--arch", type=str, default="raft_small")
     parser.add_argument("--weights", type=str, default="C_T_V1", help="a file or torchvision name (looked up locally first)")
-    parser.add_argument("--epochs", type=int, default=8, help="FlowTTT epochs per flow stage")
+    parser.add_argument("--epochs", type=int | None, default=None, help="FlowTTT epochs per flow stage (8; --quick 2)")
     parser.add_argument("--overwrite", type=bool, default=False, help="start again instead of resuming")
     return parser
 
 
 def demo(argv: list[str]) -> int:
-    """``lit-boot demo``: synthetic scene -> bootstrap -> before/after table."""
+    """``lit-boot demo``: synthetic scene -> bootstrap -> before/after table. Prints first what it
+    will do and about how long it takes from scratch on a 2-core CPU (measured: see README)."""
+    args = _demo_parser().parse_args(argv)
     from .bootstrap import Bootstrap
     from .data import load_scene, save_scene
     from .synth import make_scene
 
-    args = _demo_parser().parse_args(argv)
-    scene_dir, spec_file = args.out / "scene", args.out / "demo.json"
+    epochs = args.epochs if args.epochs is not None else (2 if args.quick else 8)
+    out = args.out or Path("runs/demo_quick" if args.quick else "runs/demo")
+    scene_dir, spec_file = out / "scene", out / "demo.json"
     spec = {k: args[k] for k in ("motion", "frames", "height", "width", "seed")}
-    fresh = args.overwrite or not spec_file.is_file() or json.loads(spec_file.read_text()) != spec
-    if fresh:  # another scene: make it, and start the run again
+    stored = {**spec, "epochs": epochs}  # another scene or size: start again
+    fresh = args.overwrite or not spec_file.is_file() or json.loads(spec_file.read_text()) != stored
+    # Measured on 2 free cores: ~1.7 s per training step (one pair, 20 RAFT updates) at 256x128,
+    # growing about as the square root of the pixels, plus start-up; far longer on busy cores
+    steps = 2 * (args.frames - 1) * epochs  # both flow stages train on every pair
+    minutes = (8 + 1.7 * steps * (args.height * args.width / (128 * 256)) ** 0.5) / 60
+    print(f"lit-boot demo: a synthetic {args.motion!r} scene ({args.frames} frames, {args.width}x{args.height}, exact "
+          f"GT); RAFT-small fine-tuned {epochs} epochs per flow stage, flow -> pose -> flow; from scratch about "
+          f"{max(1, round(minutes))} min on 2 free CPU cores" + ("" if args.quick else " (--quick: about 1 min)"),
+          flush=True)  # fmt: skip
+    if fresh:
         save_scene(make_scene(**spec), scene_dir, overwrite=True)
-        spec_file.write_text(json.dumps(spec) + "\n")
+        spec_file.write_text(json.dumps(stored) + "\n")
     scene = load_scene(scene_dir)
     print(scene.summary())
-    run = Bootstrap(scene_dir, args.out / "bootstrap", overwrite=fresh, flow_epochs=args.epochs,
+    run = Bootstrap(scene_dir, out / "bootstrap", overwrite=fresh, flow_epochs=epochs,
                     flow={"arch": args.arch, "weights": args.weights})  # fmt: skip
     result = run.run()
     print(f"\nlit-boot demo: {scene.name}, {scene.num_frames} frames {scene.width}x{scene.height}; "

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from lit_boot.bootstrap import report
+from lit_boot.bootstrap import overlay, report
 from lit_boot.bootstrap.report import overlay_frames, plot_history, write_video
 from lit_boot.data import flow_image, read_png
 from lit_boot.synth import make_scene
@@ -87,7 +87,8 @@ def test_plot_history_errors(tmp_path: Path) -> None:
 
 
 def panels(mosaic: torch.Tensor, h: int, w: int) -> list[torch.Tensor]:
-    return [mosaic[:, :h, :w], mosaic[:, :h, w:], mosaic[:, h:, :w], mosaic[:, h:, w:]]
+    """[frame, flow before, pose, flow after] of a mosaic without GT."""
+    return [mosaic[:, :h, :w], mosaic[:, :h, w : 2 * w], mosaic[:, h : 2 * h, :w], mosaic[:, h : 2 * h, w : 2 * w]]
 
 
 def test_overlay_shape_and_flow_panels() -> None:
@@ -95,17 +96,20 @@ def test_overlay_shape_and_flow_panels() -> None:
     frames = torch.randint(0, 256, (T, 3, H, W), dtype=torch.uint8)
     zero, moving = torch.zeros(T - 1, 2, H, W), uniform_flow(T - 1, 2.0, -1.0, H, W)
     original = frames.clone()
-    out = overlay_frames(frames, zero, moving, None, None, None)
+    out = overlay_frames(frames, zero, moving, None, None, None, legend=False)
     assert out.shape == (T - 1, 3, 2 * H, 2 * W) and out.dtype == torch.uint8
+    keyed = overlay_frames(frames, zero, moving, None, None, None)
+    assert keyed.shape[:2] == (T - 1, 3) and keyed.shape[2] > 2 * H and keyed.shape[3] == 2 * W
+    assert torch.equal(keyed[:, :, : 2 * H], out)  # the key goes below
     for t in range(T - 1):
-        frame, before, after, pose = panels(out[t], H, W)
+        frame, before, pose, after = panels(out[t], H, W)
         below = (slice(None), slice(H // 2, None), slice(None))  # away from the labels
         assert torch.equal(frame[below], frames[t][below]) and torch.equal(pose[below], frames[t][below])
         assert (before[below] >= 250).all()  # zero flow is white
         assert (after[below].int().amin(0) < 200).all()  # saturated colour, not white
-        assert torch.equal(after[below], flow_image(moving[t])[below])  # it is the largest: full scale
+        assert torch.equal(after[below], flow_image(moving[t], 5**0.5)[below])  # all move alike: full scale
     # labels in the top band: each panel its own ("frame 0" is not written over the pose panel)
-    frame, _, _, pose = panels(out[0], H, W)
+    frame, _, pose, _ = panels(out[0], H, W)
     assert not torch.equal(frame[:, :12], frames[0][:, :12]) and not torch.equal(pose[:, :12], frames[0][:, :12])
     assert not torch.equal(frame[:, :12], pose[:, :12])
     assert torch.equal(frames, original)  # the input is not drawn on
@@ -117,7 +121,7 @@ def test_overlay_common_scale() -> None:
     small, large = uniform_flow(1, 1.0, 0.0, H, W), uniform_flow(1, 4.0, 0.0, H, W)
     a = overlay_frames(frames, small, large, None, None, None)[0]
     b = overlay_frames(frames, large, large, None, None, None)[0]
-    _, small_img, large_img, _ = panels(a, H, W)
+    _, small_img, _, large_img = panels(a, H, W)
     # the smaller flow is paler than the larger one (same direction, same scale)
     assert (small_img[:, -4:].int().sum(0) > large_img[:, -4:].int().sum(0)).all()
     assert torch.equal(panels(b, H, W)[1][:, -4:], large_img[:, -4:])
@@ -129,9 +133,9 @@ def test_overlay_skeleton_colours() -> None:
     after = scene.gt.joints2d
     before = after + torch.tensor([-25.0, 0.0])  # 25 px to the left
     out = overlay_frames(scene.frames, scene.gt.flow, scene.gt.flow, before, after, scene.gt.joints_layout)
-    assert out.shape == (T - 1, 3, 2 * H, 2 * W)
+    assert out.shape[:2] == (T - 1, 3) and out.shape[2] > 2 * H and out.shape[3] == 2 * W
     for t in range(T - 1):
-        pose = panels(out[t], H, W)[3].int()
+        pose = panels(out[t], H, W)[2].int()
         for j in (1, 4):  # knees: below the label band
             x, y = after[t, j].round().long().tolist()
             r, g, b = pose[:, y, x].tolist()
@@ -140,7 +144,7 @@ def test_overlay_skeleton_colours() -> None:
             r, g, b = pose[:, y, x].tolist()
             assert r > 200 and g < 60 and b < 60, (t, j, (r, g, b))
     without = overlay_frames(scene.frames, scene.gt.flow, scene.gt.flow, None, None, None)
-    below = (slice(None), slice(H + 20, None), slice(W, None))
+    below = (slice(None), slice(H + 20, 2 * H), slice(None, W))
     assert torch.equal(without[0][below], scene.frames[0][:, 20:])
     assert not torch.equal(out[0][below], scene.frames[0][:, 20:])
 
@@ -150,9 +154,9 @@ def test_overlay_downscales() -> None:
     scene_like = torch.zeros(T, 3, H, W, dtype=torch.uint8)
     joints = torch.tensor([[float(x), 40.0] for x in range(20, 90, 5)]).expand(T, 14, 2).clone()
     flows = torch.zeros(1, 2, H, W), torch.ones(1, 2, H, W)
-    out = overlay_frames(scene_like, *flows, None, joints, "lsp14", max_side=100)
+    out = overlay_frames(scene_like, *flows, None, joints, "lsp14", max_side=100, legend=False)
     assert out.shape == (1, 3, 60, 100)  # the 120 x 200 mosaic halved
-    pose = panels(out[0], 30, 50)[3]
+    pose = panels(out[0], 30, 50)[2]
     r, g, b = pose[:, 20, 25].tolist()  # joint 6 at (50, 40) px -> (24.75, 19.75) px
     assert g > 200 and r < 60 and b < 60, (r, g, b)
 
@@ -249,10 +253,75 @@ def test_write_video_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> 
 
 def test_panel_labels_are_white_on_a_solid_black_box() -> None:
     grey = np.full((270, 480, 3), 200, np.uint8)
-    out = report._label(grey, "refined")
+    out = overlay._label(grey, "refined")
     changed = np.nonzero((out != 200).any(2))
     box = out[: changed[0].max() + 1, : changed[1].max() + 1]
     assert 60 < box.shape[1] < 200 and 10 < box.shape[0] < 40  # top left, about the text's size
     assert not (box == 200).all(2).any()  # no background shows through the label
     assert (box == 0).all(2).mean() > 0.4 and (box.min(2) > 128).any()  # a black box with light text
     assert (grey == 200).all()  # the input is not drawn on
+
+
+# --- the before/after table ------------------------------------------------------------------
+
+
+def table_rows(table: str) -> dict[str, list[str]]:
+    """metric -> [unit, before, after, change] of a markdown table."""
+    rows = [line for line in table.splitlines() if line.startswith("| ") and not line.startswith(("| metric", "| ---"))]
+    return {cells[0]: cells[1:] for cells in ([c.strip() for c in r.strip("|").split("|")] for r in rows)}
+
+
+RUN = [
+    {"stage": "initial", "kind": "initial", "cycle": 0, "epe": 0.30, "epe_person": 5.0, "mpjpe_mm": 60.0,
+     "agreement_px": 4.0, "info": {"seconds": 1.0}},
+    {"stage": "flow_1", "kind": "flow", "cycle": 1, "epe": 0.33, "epe_person": 4.0, "drift_px": 0.2,
+     "agreement_px": 3.0},
+    {"stage": "pose_1", "kind": "pose", "cycle": 1, "mpjpe_mm": 50.0, "pa_mpjpe_mm": 40.0, "agreement_px": 2.0},
+    {"stage": "flow_2", "kind": "flow", "cycle": 2, "epe": 0.36, "epe_person": 3.0, "drift_px": 0.25,
+     "agreement_px": 2.0},
+    {"stage": "pose_2", "kind": "pose", "cycle": 2, "mpjpe_mm": 99.0, "agreement_px": 9.0, "rolled_back": True},
+]  # fmt: skip
+
+
+def test_before_after_starts_drift_at_zero_and_skips_rolled_back_stages() -> None:
+    values = report.before_after(RUN)
+    assert list(values) == ["epe", "epe_person", "mpjpe_mm", "agreement_px", "drift_px", "pa_mpjpe_mm"]
+    assert values["drift_px"] == (0.0, 0.25)  # RAFT's own flow has no drift
+    assert values["mpjpe_mm"] == (60.0, 50.0) and values["agreement_px"] == (4.0, 2.0)  # pose_2 rolled back
+    assert values["epe"] == (0.30, 0.36)
+
+
+def test_table_says_units_direction_worse_and_explains_the_metrics() -> None:
+    table = report.metrics_table(RUN)
+    rows = table_rows(table)
+    assert set(rows) == {"epe", "epe_person", "mpjpe_mm", "pa_mpjpe_mm", "agreement_px", "drift_px"}
+    assert all(len(cells) == 4 for cells in rows.values())  # a well-formed markdown table
+    assert rows["epe"] == ["px", "0.300", "0.360", "+20.0% **worse**"]
+    assert rows["epe_person"] == ["px", "5.000", "3.000", "-40.0% better"]
+    assert rows["mpjpe_mm"] == ["mm", "60.000", "50.000", "-16.7% better"]
+    assert rows["agreement_px"][3] == "-50.0% better"
+    assert rows["pa_mpjpe_mm"] == ["mm", "40.000", "40.000", "unchanged"]
+    assert rows["drift_px"] == ["px", "0.000", "0.250", "+0.250 px"]  # neither better nor worse
+    assert "lower is better" in table.splitlines()[0]
+    assert "worse: epe." in table and "but drift_px" in table
+    legend = {line.split(":")[0]: line for line in table.splitlines() if line.startswith("- ")}
+    assert set(legend) == {"- epe / epe_person", "- mpjpe_mm / pa_mpjpe_mm", "- agreement_px", "- drift_px"}
+    assert "L_opt residual" in legend["- agreement_px"] and "not accuracy" in legend["- agreement_px"]
+    assert "outside the person" in legend["- drift_px"] and "RAFT" in legend["- drift_px"]
+
+
+def test_table_covers_every_metric_the_history_can_hold() -> None:
+    names = ["epe", "epe_person", "epe_background", "epe_joints", "mpjpe_mm", "pa_mpjpe_mm",
+             "accel_mm_per_frame2", "kp2d_px", "agreement_px", "drift_px"]  # fmt: skip
+    history = [{"stage": "initial", **{k: 2.0 for k in names}}, {"stage": "flow_1", **{k: 1.0 for k in names}}]
+    table = report.metrics_table(history)
+    rows = table_rows(table)
+    assert set(rows) == set(names) and "none got worse." in table
+    assert rows["accel_mm_per_frame2"][0] == "mm/frame²" and rows["kp2d_px"][0] == "px"
+    assert all(cells[3] == "-50.0% better" for k, cells in rows.items() if k != "drift_px")
+    legended = " ".join(line.split(":")[0] for line in table.splitlines() if line.startswith("- "))
+    assert all(k in legended for k in names)
+    # NaN (no joint counted) and a zero start are shown without a percentage
+    rows = table_rows(report.metrics_table([{"stage": "a", "agreement_px": float("nan"), "epe": 0.0},
+                                            {"stage": "b", "agreement_px": 1.0, "epe": 0.5}]))  # fmt: skip
+    assert rows["agreement_px"][3] == "" and rows["epe"][3] == "+0.500 px **worse**"

@@ -12,12 +12,12 @@ from ..data.atomic import atomic_write_bytes
 from ..flow import write_flows, write_flows_npz
 from .config import BootstrapConfig
 from .evaluate import pose_points
-from .report import overlay_frames, plot_history, write_video
+from .report import overlay_frames, plot_history, video_fps, write_video
 
 if TYPE_CHECKING:
     from .runner import BootstrapResult
 
-__all__ = ["write_outputs", "speed_summary"]
+__all__ = ["write_outputs", "write_overlay_video", "speed_summary"]
 
 
 def speed_summary(result: BootstrapResult) -> dict[str, float]:
@@ -60,11 +60,25 @@ def write_outputs(
     atomic_write_bytes(out / "summary.json", (json.dumps(summary, indent=2, default=str) + "\n").encode())
     plot_history(result.history, out / "metrics.png")
     if config.video:
-        before, keep0 = pose_points(result.initial_scene, config.mode)
-        after, keep1 = pose_points(result.scene, config.mode)
-        layout = result.scene.joints3d_layout if config.mode == "3d" else result.scene.keypoints_layout
-        nan = float("nan")
-        before = torch.where(keep0[..., None], before, nan)
-        after = torch.where(keep1[..., None], after, nan)
-        mosaic = overlay_frames(result.scene.frames, result.initial_flows, result.flows, before, after, layout)
-        write_video(mosaic, out / "overlay.mp4", fps=result.scene.fps)
+        write_overlay_video(result, config.mode)
+
+
+def write_overlay_video(result: BootstrapResult, mode: str) -> None:
+    """overlay.mp4: the mosaics of :func:`overlay_frames` (with the GT flow and the EPE change
+    when the scene has GT flow, over pixels valid and not occluded, as the EPE metrics) at
+    :func:`video_fps` (2 fps for up to 10 mosaics, else as fast as lasts 5 s, at most the scene's fps)."""
+    before, keep0 = pose_points(result.initial_scene, mode)
+    after, keep1 = pose_points(result.scene, mode)
+    layout = result.scene.joints3d_layout if mode == "3d" else result.scene.keypoints_layout
+    nan = float("nan")
+    before = torch.where(keep0[..., None], before, nan)
+    after = torch.where(keep1[..., None], after, nan)
+    gt, gt_flow, valid = result.scene.gt, None, None
+    if gt is not None and gt.flow is not None:
+        gt_flow = gt.flow
+        valid = gt.flow_valid if gt.flow_valid is not None else torch.ones(gt.flow[:, 0].shape, dtype=torch.bool)
+        if gt.flow_occluded is not None:
+            valid = valid & ~gt.flow_occluded
+    mosaic = overlay_frames(result.scene.frames, result.initial_flows, result.flows, before, after, layout,
+                            gt_flow=gt_flow, gt_valid=valid)  # fmt: skip
+    write_video(mosaic, result.run_dir / "overlay.mp4", fps=video_fps(len(mosaic), result.scene.fps))

@@ -1,8 +1,8 @@
-"""What a bootstrap run shows: a metrics plot per stage, before/after overlays, an mp4 video.
+"""What a bootstrap run shows: the before/after table, a metrics plot per stage, an mp4 video
+of the before/after overlays (made by :mod:`lit_boot.bootstrap.overlay`).
 
-Images are uint8 tensors (3, H, W) in RGB order; flows are (2, H, W) px, the displacement from
-frame t to frame t+1; keypoints are (x, y) pixels with pixel centres at integer coordinates.
-Every file is written atomically (a temporary file beside the target, then renamed).
+Images are uint8 tensors (3, H, W) in RGB order. Every file is written atomically (a
+temporary file beside the target, then renamed).
 """
 
 from __future__ import annotations
@@ -19,11 +19,10 @@ import torch
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..core.joints import JointLayout, get_layout
 from ..data.atomic import atomic_file, atomic_write_bytes
-from ..data.visualize import draw_skeleton, flow_image
+from .overlay import overlay_frames, video_fps
 
-__all__ = ["overlay_frames", "plot_history", "write_video"]
+__all__ = ["before_after", "metrics_table", "overlay_frames", "plot_history", "video_fps", "write_video"]
 
 _NOT_METRICS = ("stage", "kind", "cycle")
 _UNITS = (("_mm_per_frame2", "mm/frame²"), ("_px", "px"), ("_mm", "mm"))
@@ -42,6 +41,71 @@ def _metric_value(value: object) -> float | None:
     if not isinstance(value, (float, np.floating)) or not math.isfinite(value):
         return None
     return float(value)
+
+
+#: Metrics that are not better when lower: a diagnostic, shown without "better" / "worse".
+NEUTRAL_METRICS = ("drift_px",)
+
+#: One legend line per metric family (the metrics of lit_boot.bootstrap.evaluate), in order.
+METRIC_LEGEND = (
+    (("epe", "epe_person", "epe_background", "epe_joints"),
+     "flow end-point error vs the GT flow over valid, non-occluded pixels: all, on / off the GT "
+     "person mask, at the GT joints"),
+    (("mpjpe_mm", "pa_mpjpe_mm"), "3D joint error vs GT, root-aligned / after Procrustes alignment"),
+    (("accel_mm_per_frame2",), "acceleration error vs GT (jitter)"),
+    (("kp2d_px",), "2D keypoint error vs GT"),
+    (("agreement_px",),
+     "flow-pose agreement: the L_opt residual of the current poses under the current flow "
+     "(self-consistency, not accuracy; needs no GT)"),
+    (("drift_px",),
+     "how far the flow outside the person moved from RAFT's (needs no GT; 0 before by definition; "
+     "a diagnostic, neither better nor worse)"),
+)  # fmt: skip
+
+
+def before_after(history: Sequence[dict]) -> dict[str, tuple[float, float]]:
+    """Each metric's value (float) at its first record and at its last, rolled-back stages left
+    out, in order of first appearance; drift_px starts at 0.0 (the initial flow is RAFT's)."""
+    first: dict[str, float] = {}
+    last: dict[str, float] = {}
+    for record in history:
+        if record.get("rolled_back"):
+            continue
+        for k, v in record.items():
+            if isinstance(v, float) and k not in _NOT_METRICS:
+                first.setdefault(k, v)
+                last[k] = v
+    if "drift_px" in first:
+        first["drift_px"] = 0.0
+    return {k: (first[k], last[k]) for k in first}
+
+
+def _change(metric: str, a: float, b: float) -> str:
+    """``-12.0% better``, ``+3.1% **worse**``, ``unchanged``; in the unit when ``a`` is 0."""
+    if not (math.isfinite(a) and math.isfinite(b)):
+        return ""
+    if b == a:
+        return "unchanged"
+    change = f"{100 * (b - a) / abs(a):+.1f}%" if a else f"{b - a:+.3f} {_unit(metric)}".rstrip()
+    if metric in NEUTRAL_METRICS:
+        return change
+    return f"{change} better" if b < a else f"{change} **worse**"
+
+
+def metrics_table(history: Sequence[dict]) -> str:
+    """Markdown: every metric's unit, value before (the initial stage) and after (its last
+    stage), and change, marked ``better`` or ``**worse**`` (lower is better but for
+    :data:`NEUTRAL_METRICS`); then one legend line per metric family present."""
+    values = before_after(history)
+    rows = ["| metric | unit | before | after | change (lower is better) |", "| --- | --- | --- | --- | --- |"]
+    rows += [f"| {k} | {_unit(k)} | {a:.3f} | {b:.3f} | {_change(k, a, b)} |" for k, (a, b) in values.items()]
+    worse = [k for k, (a, b) in values.items() if k not in NEUTRAL_METRICS and b > a]
+    rows += ["", "Before: the initial stage (pretrained RAFT, the input poses); after: each metric's last "
+             f"stage. Lower is better for every metric but {', '.join(NEUTRAL_METRICS)}; "
+             + (f"worse: {', '.join(worse)}." if worse else "none got worse.")]  # fmt: skip
+    rows += [f"- {' / '.join(k for k in names if k in values)}: {text}"
+             for names, text in METRIC_LEGEND if any(k in values for k in names)]  # fmt: skip
+    return "\n".join(rows)
 
 
 def plot_history(history: Sequence[dict], path: str | os.PathLike) -> Path:
@@ -89,101 +153,6 @@ def plot_history(history: Sequence[dict], path: str | os.PathLike) -> Path:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png")
     return atomic_write_bytes(path, buffer.getvalue())
-
-
-def _check(
-    tensor: object, name: str, shape: tuple[int | None, ...], expected: str, dtype: torch.dtype | None = None
-) -> None:
-    """ValueError naming ``name`` unless ``tensor`` is a tensor of ``shape`` (None: any size)."""
-    ok = isinstance(tensor, torch.Tensor) and tensor.ndim == len(shape)
-    ok = ok and all(s is None or s == t for s, t in zip(shape, tensor.shape))
-    ok = ok and (dtype is None or tensor.dtype == dtype) and (dtype is not None or tensor.is_floating_point())
-    if not ok:
-        got = f"{tensor.dtype} {tuple(tensor.shape)}" if isinstance(tensor, torch.Tensor) else type(tensor).__name__
-        kind = "uint8" if dtype == torch.uint8 else "float"
-        raise ValueError(f"overlay_frames: expected {name} as a {kind} tensor of shape {expected}, got {got}")
-
-
-def _label(image: np.ndarray, text: str) -> np.ndarray:
-    """A copy of an HWC uint8 image with ``text`` top left: white on a black box (an outline
-    drawn thicker would not line up: OpenCV's glyph advance grows with the thickness)."""
-    scale = max(0.3, min(image.shape[:2]) / 400)
-    org = (3, 3 + round(22 * scale))
-    image = np.array(image, order="C", copy=True)  # never draw into a caller's (or shared) buffer
-    (w, h), baseline = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
-    cv2.rectangle(image, (0, 0), (org[0] + w + 2, org[1] + baseline), (0, 0, 0), cv2.FILLED)
-    cv2.putText(image, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1, cv2.LINE_AA)
-    return image
-
-
-def overlay_frames(
-    frames: torch.Tensor,
-    flow_before: torch.Tensor,
-    flow_after: torch.Tensor,
-    joints_before: torch.Tensor | None,
-    joints_after: torch.Tensor | None,
-    layout: str | JointLayout | None,
-    max_side: int = 1280,
-    flow_labels: tuple[str, str] = ("RAFT", "refined"),
-) -> torch.Tensor:
-    """Before/after mosaics, one per frame pair: uint8 (T-1, 3, 2h, 2w).
-
-    frames uint8 (T, 3, H, W) RGB; flow_before / flow_after float (T-1, 2, H, W) px, pair t ->
-    t+1; joints_before / joints_after (T, J, 2) px in ``layout`` (J = its number of joints),
-    or None. Mosaic for pair t: [frame t | flow before] over [flow after | frame t with the
-    skeleton before in red and after in green (drawn last, on top)]. Both flows of a pair are
-    coloured with the same maximum magnitude (the larger of the two), so colours compare;
-    zero flow is white. Each panel carries a text label. Panels are h x w = H x W, scaled down
-    (INTER_AREA; joints scaled with them, so lines stay crisp) when the mosaic's longer side
-    would exceed ``max_side``. Raises ValueError naming the argument for a wrong shape.
-    """
-    _check(frames, "frames", (None, 3, None, None), "(T, 3, H, W)", torch.uint8)
-    T, _, H, W = frames.shape
-    if T < 2:
-        raise ValueError(f"overlay_frames: expected frames with T >= 2 frames, got {tuple(frames.shape)}")
-    for name, flow in (("flow_before", flow_before), ("flow_after", flow_after)):
-        _check(flow, name, (T - 1, 2, H, W), f"(T-1, 2, H, W) = ({T - 1}, 2, {H}, {W})")
-    joints = {"before": joints_before, "after": joints_after}
-    if any(j is not None for j in joints.values()):
-        if layout is None:
-            raise ValueError("overlay_frames: layout is required when joints_before or joints_after is given")
-        layout = get_layout(layout)
-        J = layout.num_joints
-        for name, j in joints.items():
-            if j is not None:
-                _check(j, f"joints_{name}", (T, J, 2), f"(T, J, 2) = ({T}, {J}, 2) for layout {layout.name!r}")
-    if max_side < 2:
-        raise ValueError(f"overlay_frames: max_side must be >= 2, got {max_side}")
-    scale = min(1.0, max_side / (2 * max(H, W)))
-    h, w = max(1, int(H * scale)), max(1, int(W * scale))
-    sx, sy = w / W, h / H
-
-    def resize(image: torch.Tensor) -> np.ndarray:  # (3, H, W) -> HWC (h, w, 3)
-        array = image.permute(1, 2, 0).numpy()
-        return array if (h, w) == (H, W) else cv2.resize(array, (w, h), interpolation=cv2.INTER_AREA)
-
-    frames = frames.detach().cpu()
-    mosaics = []
-    for t in range(T - 1):
-        pair = torch.nan_to_num(torch.stack([flow_before[t], flow_after[t]]).detach().cpu().float(), 0.0, 0.0, 0.0)
-        top = float(pair.norm(dim=1).max())
-        before_img, after_img = flow_image(pair, max_magnitude=max(top, 1e-6))
-        frame = torch.from_numpy(np.ascontiguousarray(resize(frames[t]))).permute(2, 0, 1)
-        pose = frame
-        for j, colour in zip(joints.values(), ("red", "lime")):
-            if j is not None:
-                points = j[t].detach().cpu().float()
-                points = (points + 0.5) * torch.tensor([sx, sy]) - 0.5  # pixel centres stay centres
-                pose = draw_skeleton(pose, points, layout, color=colour)
-        panels = [
-            _label(frame.permute(1, 2, 0).numpy(), f"frame {t}"),
-            _label(resize(before_img), flow_labels[0]),
-            _label(resize(after_img), flow_labels[1]),
-            _label(pose.permute(1, 2, 0).numpy(), "pose before/after"),
-        ]
-        mosaic = np.concatenate([np.concatenate(panels[:2], 1), np.concatenate(panels[2:], 1)], 0)
-        mosaics.append(torch.from_numpy(mosaic).permute(2, 0, 1))
-    return torch.stack(mosaics).contiguous()
 
 
 def write_video(frames_uint8: torch.Tensor, path: str | os.PathLike, fps: float) -> Path:

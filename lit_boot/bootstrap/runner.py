@@ -75,25 +75,17 @@ class BootstrapResult:
     seconds: dict[str, float] = field(default_factory=dict)
 
     def before_after(self) -> dict[str, tuple[float, float]]:
-        """Each metric's value at the start and at its last stage."""
-        first: dict[str, float] = {}
-        last: dict[str, float] = {}
-        for record in self.history:
-            if record.get("rolled_back"):
-                continue
-            for k, v in record.items():
-                if isinstance(v, float) and k != "cycle":
-                    first.setdefault(k, v)
-                    last[k] = v
-        return {k: (first[k], last[k]) for k in first}
+        """Each metric's value at the start and at its last stage (see report.before_after)."""
+        from .report import before_after
+
+        return before_after(self.history)
 
     def table(self) -> str:
-        """A before/after table (markdown) of every metric."""
-        rows = ["| metric | before | after | change |", "| --- | --- | --- | --- |"]
-        for k, (a, b) in self.before_after().items():
-            change = f"{100 * (b - a) / a:+.1f}%" if a and np.isfinite(a) and np.isfinite(b) else ""
-            rows.append(f"| {k} | {a:.3f} | {b:.3f} | {change} |")
-        return "\n".join(rows)
+        """A before/after table (markdown) of every metric with units, changes marked better /
+        worse, and a legend (see report.metrics_table)."""
+        from .report import metrics_table
+
+        return metrics_table(self.history)
 
 
 def _save_tensor(path: Path, state: dict[str, torch.Tensor]) -> None:
