@@ -95,6 +95,7 @@ def _bootstrap_parser() -> ArgumentParser:
                         help="or a video file / frame folder: poses from --data.poses, else MediaPipe Pose")  # fmt: skip
     parser.add_argument("--data.poses", type=Path | None, default=None, help="pose file for --data.video")
     parser.add_argument("--data.stride", type=int, default=1, help="--data.video: every N-th frame")
+    parser.add_argument("--data.max_frames", type=int | None, default=None, help="--data.video: at most N frames")
     parser.add_argument("--data.resize", type=int | float | None, default=None,
                         help="--data.video: a height in px (int) or a scale (float)")  # fmt: skip
     parser.add_argument("--out", type=Path | None, default=None, help="run folder (default runs/<scene>/bootstrap)")
@@ -120,7 +121,8 @@ def bootstrap(argv: list[str]) -> int:
         from .data.readers import read_video
         from .import_cli import with_poses
 
-        scene = read_video(data.video, stride=data.stride, resize=data.resize, poses=data.poses)
+        scene = read_video(data.video, stride=data.stride, max_frames=data.max_frames, resize=data.resize,
+                           poses=data.poses)  # fmt: skip
         scene = with_poses(scene, None, estimate=data.poses is None)
         out = out or Path("runs") / data.video.stem / "bootstrap"
     result = Bootstrap(scene, out, _config_from(args, BootstrapConfig), overwrite=args.overwrite).run()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 
 import pytest
 import torch
@@ -52,7 +53,8 @@ def test_bootstrap_needs_exactly_one_of_scene_and_video(tmp_path, capsys):
 @pytest.mark.mediapipe
 @pytest.mark.shared
 def test_bootstrap_a_video_alone_estimates_poses_then_runs(shared, tmp_path, capsys):
-    args = ["bootstrap", "--data.video", str(shared / FOOTBALL), "--data.stride", "4", "--data.resize", "0.25",
+    args = ["bootstrap", "--data.video", str(shared / FOOTBALL), "--data.stride", "4", "--data.max_frames", "2",
+            "--data.resize", "0.25",
             "--out", str(tmp_path / "run"), "--flow.weights", str(shared / "checkpoints/raft-small.pth"),
             "--flow.train_updates", "2", "--flow.predict_updates", "3", "--flow_epochs", "1", "--pose_steps", "10",
             "--progress_bar", "false", "--video", "false"]  # fmt: skip
@@ -60,6 +62,7 @@ def test_bootstrap_a_video_alone_estimates_poses_then_runs(shared, tmp_path, cap
     out = capsys.readouterr().out
     assert "| agreement_px |" in out
     assert (tmp_path / "run/poses.npz").is_file() and (tmp_path / "run/summary.json").is_file()
+    assert json.loads((tmp_path / "run/summary.json").read_text())["speed"]["frames"] == 2  # --data.max_frames
 
 
 def help_of(argv, capsys) -> str:
