@@ -21,6 +21,8 @@ import copy
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from .selfcheck import SELF_CHECKS
+
 __all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "BootstrapConfig"]
 
 MODES = ("3d", "2d")
@@ -101,6 +103,14 @@ class BootstrapConfig:
         flow_format: flo (one Middlebury file per pair) or npz for the run's final flows.
         video: write overlay.mp4.
         progress_bar: Lightning's progress bars.
+        self_check: after each flow stage, without ground truth: off, or photometric (per pair,
+            in the person region and in background tiles, keep the tuned flow only where its
+            census error is clearly lower than the initial flow's; see
+            :mod:`lit_boot.bootstrap.selfcheck`). The stage's flows are then the checked flows.
+        self_check_margin: how much lower (a fraction of the initial flow's error) the tuned
+            flow's error must be to be kept; ties keep the initial flow.
+        self_check_tile: background tile size, px.
+        self_check_blend: px over which the two flows are blended at region borders.
         seed: seed_everything before each stage (the same run gives the same result).
     """
 
@@ -123,10 +133,15 @@ class BootstrapConfig:
     flow_format: str = "flo"
     video: bool = True
     progress_bar: bool = True
+    self_check: str = "off"
+    self_check_margin: float = 0.02
+    self_check_tile: int = 64
+    self_check_blend: int = 4
     seed: int = 0
 
     def __post_init__(self) -> None:
-        checks = [("mode", MODES), ("preset", tuple(PRESETS)), ("drift_guard", DRIFT_GUARDS), ("flow_format", ("flo", "npz"))]
+        checks = [("mode", MODES), ("preset", tuple(PRESETS)), ("drift_guard", DRIFT_GUARDS),
+                  ("flow_format", ("flo", "npz")), ("self_check", SELF_CHECKS)]
         for name, allowed in checks:
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name}: expected one of {allowed}, got {getattr(self, name)!r}")
@@ -136,6 +151,11 @@ class BootstrapConfig:
             raise ValueError(f"flow_epochs: expected >= 1 or None, got {self.flow_epochs}")
         if self.pose_steps < 1:
             raise ValueError(f"pose_steps: expected >= 1, got {self.pose_steps}")
+        if not 0 <= self.self_check_margin < 1:
+            raise ValueError(f"self_check_margin: expected 0 <= margin < 1, got {self.self_check_margin}")
+        if self.self_check_tile < 1 or self.self_check_blend < 0:
+            raise ValueError(f"self_check_tile / self_check_blend: expected >= 1 / >= 0 px, got "
+                             f"{self.self_check_tile} / {self.self_check_blend}")
         if self.drift_tolerance < 0:
             raise ValueError(f"drift_tolerance: expected >= 0 px, got {self.drift_tolerance}")
 

@@ -53,6 +53,7 @@ from .evaluate import agreement, drift, flow_metrics, pose_metrics, pose_points
 from .folder import STAGE_JSON, RunFolder
 from .lock import RunLock
 from .outputs import write_outputs
+from .selfcheck import check_stage
 from .stages import fine_tune_flow, make_flow_model, make_refiner, predict_flows, refine_poses_stage
 
 __all__ = ["Bootstrap", "BootstrapResult", "bootstrap", "STAGE_JSON"]
@@ -213,7 +214,8 @@ class Bootstrap:
     # --- the stages --------------------------------------------------------------------------------
     def _flow_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], torch.Tensor]:
         """Fine-tune every ensemble member on the stick-man of the current poses; the record
-        and the members' mean flow (T-1, 2, H, W) px."""
+        and the members' mean flow (T-1, 2, H, W) px, self-checked against the initial flow when
+        the config says so (:mod:`~lit_boot.bootstrap.selfcheck`)."""
         cfg, n = self.config, len(self.models)
         what = f"FlowTTT x{n}, {cfg.epochs} epochs, {st.precision} on {st.accelerator}"
         print(stage_header(index, len(cfg.stages()), name, what), flush=True)
@@ -226,9 +228,12 @@ class Bootstrap:
             flows.append(predict_flows(model, st.scene, st.accelerator, st.precision))
         mean = torch.stack(flows).mean(0)
         person = self.models[0].person_region(self.models[0].sketch_masks)
+        mean, check = check_stage(cfg, st.scene, st.initial, mean, person)
         record = {**flow_metrics(st.scene, mean), "drift_px": drift(mean, st.initial, person),
                   "agreement_px": agreement(mean, *pose_points(st.scene, cfg.mode)),
                   "info": {"target": reports[0], "sketch": self.models[0].hparams["sketch"]}}  # fmt: skip
+        if check is not None:
+            record["info"]["self_check"] = check
         return record, mean
 
     def _pose_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], PoseResult]:

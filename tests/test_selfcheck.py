@@ -1,0 +1,151 @@
+"""The flow stage's self-check (lit_boot.bootstrap.selfcheck) on tiny synthetic scenes (CPU)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from numpy import load as np_load
+import torch
+
+import lit_boot
+from lit_boot.bootstrap import Bootstrap, BootstrapConfig, bootstrap
+from lit_boot.bootstrap import runner as runner_module
+from lit_boot.bootstrap.selfcheck import blend_weights, region_labels, region_names, self_check
+from lit_boot.flow.evidence import photometric_error
+
+TILE = 32
+
+
+def fast_run(shared, **options):
+    flow = {"weights": str(shared / "checkpoints/raft-small.pth"), "train_updates": 2, "predict_updates": 3}
+    return dict(flow=flow, flow_epochs=1, cycles=0, progress_bar=False, video=False, self_check="photometric",
+                self_check_tile=TILE, **options)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return lit_boot.make_scene(motion="run", frames=3, height=64, width=96, seed=0)
+
+
+def test_regions_are_the_person_and_background_tiles():
+    person = torch.zeros(1, 64, 96, dtype=torch.bool)
+    person[0, 10:20, 40:50] = True
+    labels = region_labels(person, TILE)
+    names = region_names(64, 96, TILE)
+    assert names == ["person", "tile_0_0", "tile_0_1", "tile_0_2", "tile_1_0", "tile_1_1", "tile_1_2"]
+    assert (labels[person] == 0).all() and labels[0, 0, 0] == 1 and labels[0, 63, 95] == 6
+    assert names[int(labels[0, 40, 70])] == "tile_1_2"
+    assert labels[0, 19, 39] == names.index("tile_0_1") and labels[0, 19, 40] == 0
+
+
+def test_a_corrupted_tile_gets_the_initial_flow_and_an_exact_region_keeps_the_tuned(scene):
+    gt = scene.gt.flow.float()
+    person = scene.gt.person_mask[:-1]
+    bad = torch.zeros(64, 96, dtype=torch.bool)
+    bad[32:, 64:] = True  # tile_1_2
+    initial = torch.where(bad, gt, gt + 1.5)  # exact in tile_1_2, 1.5 px off elsewhere
+    tuned = torch.where(bad, gt + 5.0, gt)  # 5 px off in tile_1_2, exact elsewhere
+    flows, record = self_check(scene.frames, initial, tuned, person, margin=0.02, tile=TILE, blend=4)
+    for pair in record["per_pair"]:
+        assert "tile_1_2" not in pair["tuned"]
+        assert {"person", "tile_0_0", "tile_0_1", "tile_0_2", "tile_1_0", "tile_1_1"} <= set(pair["tuned"])
+        err_initial, err_tuned, pixels = pair["regions"]["tile_1_2"]
+        assert err_initial < err_tuned and pixels > 0
+    assert record["regions_initial"] == 2 and record["regions_tuned"] == 12 and record["person_tuned"] == 2
+    # away from the tile's border (> blend px) the output is exactly one flow or the other
+    far_bad = torch.zeros_like(bad)
+    far_bad[37:, 69:] = True
+    far_good = torch.zeros_like(bad)
+    far_good[:27, :59] = True
+    assert torch.equal(flows[:, :, far_bad], initial[:, :, far_bad])
+    assert torch.equal(flows[:, :, far_good], tuned[:, :, far_good])
+    assert 0.5 < record["kept_tuned_fraction"] < 1.0
+
+
+def test_ties_keep_the_initial_flow(scene):
+    gt = scene.gt.flow.float()
+    person = scene.gt.person_mask[:-1]
+    initial = gt + 0.7
+    flows, record = self_check(scene.frames, initial, initial.clone(), person, tile=TILE)
+    assert torch.equal(flows, initial)
+    assert record["kept_tuned_fraction"] == 0.0 and record["regions_tuned"] == 0
+    # a gain within the margin is a tie too: the tuned flow must be clearly better
+    flows, record = self_check(scene.frames, initial, initial + 1e-3, person, margin=0.02, tile=TILE)
+    assert torch.equal(flows, initial)
+
+
+def test_the_blend_is_smooth_and_exact_away_from_borders():
+    choice = torch.zeros(2, 40, 60, dtype=torch.bool)
+    choice[:, :, 30:] = True
+    weight = blend_weights(choice, blend=4)
+    assert torch.equal(weight[:, :, :26], torch.zeros(2, 40, 26))
+    assert torch.equal(weight[:, :, 35:], torch.ones(2, 40, 25))
+    ramp = weight[0, 20, 25:36]
+    assert (ramp.diff() >= 0).all() and ramp.diff().max() <= 1 / 9 + 1e-6  # steps of 1/(2*4+1)
+    assert torch.allclose(weight[0, 0], weight[0, 20])  # no fall-off at the frame's edge
+    assert torch.equal(blend_weights(choice, 0), choice.float())
+
+
+def test_config_checks_the_self_check_options():
+    assert BootstrapConfig().self_check == "off"
+    for bad in ({"self_check": "x"}, {"self_check_margin": 1.0}, {"self_check_tile": 0}, {"self_check_blend": -1}):
+        with pytest.raises(ValueError, match="self_check"):
+            BootstrapConfig(**bad)
+
+
+@pytest.mark.shared
+def test_a_run_outputs_the_checked_flows(shared, scene, tmp_path, monkeypatch):
+    real = runner_module.predict_flows
+    initial = []
+
+    def designed(*args, **kwargs):  # the flow stage "predicts" the GT left of x = 32, RAFT's + 3 px elsewhere
+        flows = real(*args, **kwargs)
+        if not initial:
+            initial.append(flows)
+            return flows
+        left = torch.arange(96) < TILE
+        return torch.where(left, scene.gt.flow.float(), initial[0] + 3.0)
+
+    monkeypatch.setattr(runner_module, "predict_flows", designed)
+    boot = Bootstrap(scene, tmp_path / "run", **fast_run(shared))
+    result = boot.run()
+    person = boot.models[0].person_region(boot.models[0].sketch_masks)
+    check = json.loads((tmp_path / "run/stages/flow_1/stage.json").read_text())["info"]["self_check"]
+    for pair in check["per_pair"]:
+        assert not {"tile_0_1", "tile_0_2", "tile_1_1", "tile_1_2"} & set(pair["tuned"])
+        assert {name for name in ("tile_0_0", "tile_1_0") if name in pair["regions"]} <= set(pair["tuned"])
+    far = ~boot.models[0].person_region(person, margin=4)  # beyond the blend around the person region
+    right, left = far.clone(), far.clone()
+    right[..., : TILE + 4] = False
+    left[..., TILE - 4 :] = False
+    assert left.any() and right.any()
+    flows, gt = result.flows.transpose(0, 1), scene.gt.flow.float().transpose(0, 1)
+    assert torch.equal(flows[:, right], initial[0].transpose(0, 1)[:, right])  # exactly RAFT's
+    assert torch.equal(flows[:, left], gt[:, left])  # exactly the tuned (here the GT) flow
+    with np_load(tmp_path / "run/stages/flow_1/flows.npz") as saved:
+        assert torch.equal(torch.from_numpy(saved["flow"]), result.flows)
+
+
+@pytest.mark.shared
+def test_a_run_with_the_self_check_records_it_does_no_harm_and_resumes(shared, scene, tmp_path):
+    result = bootstrap(scene, tmp_path / "run", **fast_run(shared))
+    stage = json.loads((tmp_path / "run/stages/flow_1/stage.json").read_text())
+    check = stage["info"]["self_check"]
+    assert check["regions_tuned"] + check["regions_initial"] > 0 and len(check["per_pair"]) == 2
+    summary = json.loads((tmp_path / "run/summary.json").read_text())
+    assert summary["stages"][-1]["info"]["self_check"]["kept_tuned_fraction"] == check["kept_tuned_fraction"]
+    assert "epe" in check["tuned_metrics"]
+    # the final flows are no worse than the initial flows in any region (up to the blend at borders)
+    person = torch.zeros(2, 64, 96, dtype=torch.bool)
+    labels = region_labels(person, TILE)
+    for flows_t, init_t, f0, f1, lab in zip(result.flows, result.initial_flows, scene.frames[:-1], scene.frames[1:],
+                                            labels):  # fmt: skip
+        err_f, ok_f = photometric_error(f0[None], f1[None], flows_t[None])
+        err_i, ok_i = photometric_error(f0[None], f1[None], init_t[None])
+        ok = (ok_f & ok_i)[0]
+        for r in lab.unique():
+            sel = ok & (lab == r)
+            assert err_f[0][sel].mean() <= err_i[0][sel].mean() * 1.02 + 0.05
+    again = bootstrap(scene, tmp_path / "run", **fast_run(shared))  # loaded, not run again
+    assert torch.equal(again.flows, result.flows)
