@@ -41,38 +41,86 @@ def gt_region_epe(flows: torch.Tensor, gt: torch.Tensor, valid: torch.Tensor, la
     return sums / pixels.clamp(min=1), pixels
 
 
-def agreement(scene, initial, tuned, person, record, tile: int, tie: float) -> tuple[int, int, int, int]:
-    """(agreeing regions, judged regions, GT ties, GT says tuned is better) for one self-check."""
+def agreement(scene, initial, tuned, person, record, tile: int, tie: float) -> dict[str, list[int]]:
+    """Per region kind ("person", "background"): [agreeing regions, judged regions, GT ties,
+    regions where GT says the tuned flow is better] for one self-check."""
     gt = scene.gt
     valid = gt.flow_valid & ~gt.flow_occluded if gt.flow_occluded is not None else gt.flow_valid
     labels = region_labels(person, tile)
     names = region_names(*initial.shape[-2:], tile)
     e_init, pixels = gt_region_epe(initial, gt.flow.float(), valid, labels, len(names))
     e_tuned, _ = gt_region_epe(tuned, gt.flow.float(), valid, labels, len(names))
-    agree = judged = ties = tuned_better = 0
+    counts = {"person": [0, 0, 0, 0], "background": [0, 0, 0, 0]}
     for t, pair in enumerate(record["per_pair"]):
         for r, name in enumerate(names):
             if pixels[t, r] < 16 or name not in pair["regions"]:
                 continue
-            judged += 1
             diff = float(e_init[t, r] - e_tuned[t, r])
-            gt_tuned = diff >= tie
-            ties += abs(diff) < tie
-            tuned_better += gt_tuned
-            agree += gt_tuned == (name in pair["tuned"])
-    return agree, judged, ties, tuned_better
+            c = counts["person" if r == 0 else "background"]
+            c[0] += (diff >= tie) == (name in pair["tuned"])
+            c[1] += 1
+            c[2] += abs(diff) < tie
+            c[3] += diff >= tie
+    return counts
 
 
-def run_scene(name: str, spec: dict, args) -> tuple:
+def run_scene(name: str, scene, mode: str, epochs: int, args) -> tuple:
     """Scene, initial and tuned flows and the person region of one bootstrap run (flow_1 only)."""
-    scene = make_scene(frames=args.frames, height=args.height, width=args.width, **spec)
     out = Path(args.out) / name
     shutil.rmtree(out, ignore_errors=True)
-    boot = Bootstrap(scene, out, flow={"weights": args.weights}, flow_epochs=args.epochs, cycles=0, video=False,
-                     progress_bar=False, seed=args.seed)  # fmt: skip
+    boot = Bootstrap(scene, out, mode=mode, flow={"weights": args.weights}, flow_epochs=epochs, cycles=0,
+                     video=False, progress_bar=False, seed=args.seed)  # fmt: skip
+    start = time.perf_counter()
     result = boot.run()
+    print(f"{name}: flow_1 in {time.perf_counter() - start:.0f} s", flush=True)
     person = boot.models[0].person_region(boot.models[0].sketch_masks)
     return scene, result.initial_flows, result.flows, person
+
+
+def sintel_scene(name: str, size: tuple[int, int]):
+    """A Sintel sample (final pass) at ``size`` with MediaPipe's keypoints (found at full size),
+    as benchmarks/real_data.py builds it."""
+    from real_data import SINTEL
+
+    from lit_boot.data.readers import read_sintel
+    from lit_boot.estimate import estimate_poses
+
+    first, last = next((f, la) for n, f, la in SINTEL if n == name)
+    root = SHARED / "data/sintel_samples"
+    poses = estimate_poses(read_sintel(root, name, first=first, last=last))
+    return poses.apply_to(read_sintel(root, name, first=first, last=last, size=size))
+
+
+def report(runs: dict, args) -> None:
+    """Print per scene, tile and margin: agreement (person, background), the tuned fraction kept
+    and EPE all / person / background of initial, tuned and checked flows; then pooled per group."""
+    keys = ("epe", "epe_person", "epe_background")
+    print("\nscene        tile margin  agree person  agree background (ties, gt:tuned)  kept tuned"
+          "  EPE all init/tuned/checked  person  background")  # fmt: skip
+    totals = {}
+    for name, (scene, initial, tuned, person) in runs.items():
+        group = "sintel" if scene.gt.person_mask is None else "synthetic"
+        m_i, m_t = flow_metrics(scene, initial), flow_metrics(scene, tuned)
+        for tile in [int(s) for s in args.tiles.split(",")]:
+            for margin in [float(s) for s in args.margins.split(",")]:
+                checked, record = self_check(scene.frames, initial, tuned, person, margin, tile, args.blend)
+                metrics = (m_i, m_t, flow_metrics(scene, checked))
+                counts = agreement(scene, initial, tuned, person, record, tile, args.tie)
+                tot = totals.setdefault((group, tile, margin), {"person": [0] * 4, "background": [0] * 4, "epe": []})
+                for kind in ("person", "background"):
+                    tot[kind] = [a + b for a, b in zip(tot[kind], counts[kind])]
+                tot["epe"].append([[m.get(k, float("nan")) for m in metrics] for k in keys])
+                epes = "  ".join("/".join(f"{m.get(k, float('nan')):.3f}" for m in metrics) for k in keys)
+                (pa, pj, _, pb), (ba, bj, bt, bb) = counts["person"], counts["background"]
+                print(f"{name:12s} {tile:4d} {margin:6.2f}  {pa:3d}/{pj:3d} (gt:tuned {pb:2d})  {ba:4d}/{bj:4d} "
+                      f"({bt:3d}, {bb:3d})  {record['kept_tuned_fraction']:10.3f}  {epes}", flush=True)  # fmt: skip
+    print("\npooled agreement and mean EPE over scenes (init / tuned / checked):")
+    for (group, tile, margin), tot in totals.items():
+        mean = torch.tensor(tot["epe"]).mean(0)
+        e = "  ".join(f"{k} {v[0]:.4f} / {v[1]:.4f} / {v[2]:.4f}" for k, v in zip(keys, mean.tolist()))
+        agree = "  ".join(f"{kind} {tot[kind][0]}/{tot[kind][1]} = {100 * tot[kind][0] / max(tot[kind][1], 1):.1f}%"
+                          for kind in ("person", "background"))  # fmt: skip
+        print(f"{group:9s} tile {tile:3d} margin {margin:.2f}: {agree}  {e}")
 
 
 def main() -> None:
@@ -86,41 +134,23 @@ def main() -> None:
     p.add_argument("--tiles", default="32,64")
     p.add_argument("--blend", type=int, default=4)
     p.add_argument("--tie", type=float, default=0.005, help="px: GT EPE differences below this are ties")
+    p.add_argument("--sintel", default="alley_1,market_5", help="Sintel samples too (2D mode, MediaPipe), e.g. alley_1,market_5")
+    p.add_argument("--sintel-size", default="218,512", help="H,W")
+    p.add_argument("--sintel-epochs", type=int, default=8)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))
     p.add_argument("--out", default="/tmp/selfcheck_check")
     args = p.parse_args()
     print(f"settings: {vars(args)}", flush=True)
     runs = {}
-    for i in [int(s) for s in args.scenes.split(",")]:
+    for i in [int(s) for s in args.scenes.split(",") if s]:
         name, spec = SCENES[i]
-        start = time.perf_counter()
-        runs[name] = run_scene(name, spec, args)
-        print(f"{name} ({spec}): flow_1 in {time.perf_counter() - start:.0f} s", flush=True)
-    keys = ("epe", "epe_person", "epe_background")
-    print("\nscene        tile margin  agree/judged  ties  gt:tuned  kept tuned  EPE all init/tuned/checked"
-          "    person init/tuned/checked    background init/tuned/checked")  # fmt: skip
-    totals = {}
-    for name, (scene, initial, tuned, person) in runs.items():
-        m_i, m_t = flow_metrics(scene, initial), flow_metrics(scene, tuned)
-        for tile in [int(s) for s in args.tiles.split(",")]:
-            for margin in [float(s) for s in args.margins.split(",")]:
-                checked, record = self_check(scene.frames, initial, tuned, person, margin, tile, args.blend)
-                m_c = flow_metrics(scene, checked)
-                a, j, ties, better = agreement(scene, initial, tuned, person, record, tile, args.tie)
-                tot = totals.setdefault((tile, margin), [0, 0, {k: [0.0, 0.0, 0.0] for k in keys}])
-                tot[0] += a
-                tot[1] += j
-                for k in keys:
-                    for s, m in enumerate((m_i, m_t, m_c)):
-                        tot[2][k][s] += m[k] / len(runs)
-                epes = "  ".join(f"{m_i[k]:.3f}/{m_t[k]:.3f}/{m_c[k]:.3f}" for k in keys)
-                print(f"{name:12s} {tile:4d} {margin:6.2f}  {a:3d}/{j:3d} {100 * a / j:5.1f}%  {ties:4d}  {better:8d}"
-                      f"  {record['kept_tuned_fraction']:10.3f}  {epes}", flush=True)  # fmt: skip
-    print("\nmean over scenes (EPE) and pooled agreement:")
-    for (tile, margin), (a, j, epes) in totals.items():
-        e = "  ".join(f"{k}: {v[0]:.4f} / {v[1]:.4f} / {v[2]:.4f}" for k, v in epes.items())
-        print(f"tile {tile:3d} margin {margin:.2f}: agreement {a}/{j} = {100 * a / j:.1f}%  init / tuned / checked  {e}")
+        scene = make_scene(frames=args.frames, height=args.height, width=args.width, **spec)
+        runs[name] = run_scene(name, scene, "3d", args.epochs, args)
+    size = tuple(int(v) for v in args.sintel_size.split(","))
+    for name in [s for s in args.sintel.split(",") if s]:
+        runs[name] = run_scene(name, sintel_scene(name, size), "2d", args.sintel_epochs, args)
+    report(runs, args)
 
 
 if __name__ == "__main__":

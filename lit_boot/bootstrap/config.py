@@ -135,7 +135,7 @@ class BootstrapConfig:
     progress_bar: bool = True
     self_check: str = "off"
     self_check_margin: float = 0.02
-    self_check_tile: int = 64
+    self_check_tile: int = 32
     self_check_blend: int = 4
     seed: int = 0
 

@@ -101,7 +101,7 @@ def self_check(
     tuned: Tensor,
     person: Tensor,
     margin: float = 0.02,
-    tile: int = 64,
+    tile: int = 32,
     blend: int = 4,
 ) -> tuple[Tensor, dict[str, Any]]:
     """The checked flows and the record of every decision.
