@@ -13,9 +13,10 @@ from .evidence import (
     tile_mean,
     warp,
 )
+from .gate import GATE_REPORT_KEYS, gate_sketch
 from .module import FlowTTT
 from .raft import load_raft, pad_to_multiple, predict_flow, prepare_pair
-from .sketch import FOOTPRINTS, SketchConfig, SketchResult, footprint_offsets, sketch_flow, sketch_from_layout, target_flow
+from .sketch import FOOTPRINTS, GATE_LEVELS, GATES, SketchConfig, SketchResult, footprint_offsets, sketch_flow, sketch_from_layout, target_flow
 from .weights import checkpoint_dirs, convert_original_state_dict, load_state_dict_file, resolve_weights
 from .writer import FlowWriter, write_flows, write_flows_npz
 
@@ -34,12 +35,16 @@ __all__ = [
     "ssim_error",
     "tile_mean",
     "warp",
+    "GATE_REPORT_KEYS",
+    "gate_sketch",
     "FlowTTT",
     "load_raft",
     "pad_to_multiple",
     "predict_flow",
     "prepare_pair",
     "FOOTPRINTS",
+    "GATES",
+    "GATE_LEVELS",
     "SketchConfig",
     "SketchResult",
     "footprint_offsets",

@@ -23,6 +23,7 @@ from lightning.pytorch.utilities import rank_zero_warn
 
 from ..finite import FiniteGuard
 from ..metrics import EndPointError, PointEndPointError
+from .gate import gate_sketch
 from .raft import load_raft, predict_flow
 from .sketch import SketchConfig, sketch_from_layout, target_flow
 
@@ -101,20 +102,39 @@ class FlowTTT(L.LightningModule):
 
     # --- targets --------------------------------------------------------------------------------
     @torch.no_grad()
-    def _predict_all(self, loader, updates: int) -> torch.Tensor:
+    def _predict_all(self, loader, updates: int, backward: bool = False) -> torch.Tensor:
+        """(P, 2, H, W) flows t -> t+1 of every pair (t+1 -> t with ``backward``), on CPU."""
         was_training = self.raft.training
         self.raft.eval()
-        flows = [predict_flow(self.raft, b["image1"], b["image2"], updates).float().cpu() for b in loader]
+        first, second = ("image2", "image1") if backward else ("image1", "image2")
+        flows = [predict_flow(self.raft, b[first], b[second], updates).float().cpu() for b in loader]
         self.raft.train(was_training)
         return torch.cat(flows)
 
     @torch.no_grad()
-    def build_targets(self, datamodule) -> dict[str, float]:
-        """Base flows, sketches and targets for every pair of ``datamodule`` (a SceneFlowData).
-        Returns a report: bones rejected by the guard and, with GT flow, the sketch's and the
-        base flow's EPE on the painted pixels."""
+    def base_flows(self, datamodule) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """RAFT's own flows (P, 2, H, W) px for every pair, and the backward ones when the
+        sketch's gate needs them ("photometric+fb"; one more pass per pair), else None."""
         loader = datamodule.predict_dataloader()
-        base = self._predict_all(loader, self.hparams.target_updates or self.hparams.train_updates)
+        updates = self.hparams.target_updates or self.hparams.train_updates
+        base = self._predict_all(loader, updates)
+        if self.sketch_config.gate != "photometric+fb":
+            return base, None
+        return base, self._predict_all(loader, updates, backward=True)
+
+    @torch.no_grad()
+    def build_targets(self, datamodule) -> dict[str, float]:
+        """Base flows, sketches and targets for every pair of ``datamodule`` (a SceneFlowData);
+        see :meth:`targets_from`."""
+        return self.targets_from(datamodule, *self.base_flows(datamodule))
+
+    @torch.no_grad()
+    def targets_from(self, datamodule, base: torch.Tensor, base_bw: torch.Tensor | None = None) -> dict[str, float]:
+        """Sketch, gate and set the targets over given base flows (P, 2, H, W) px (and the
+        backward ones for the fb gate). Returns a report: bones rejected by the guard, the
+        gate's counts (target/gate_*, see :data:`~lit_boot.flow.gate.GATE_REPORT_KEYS`), the
+        painted fraction after both and, with GT flow, the sketch's and the base flow's EPE on
+        the painted pixels."""
         inputs = datamodule.sketch_inputs()
         H, W = base.shape[-2:]
         sketch = sketch_from_layout(
@@ -122,8 +142,11 @@ class FlowTTT(L.LightningModule):
             confidence_t=inputs.confidence_t, confidence_t1=inputs.confidence_t1,
             depths=inputs.depths, base_flow=base, config=self.sketch_config,
         )  # fmt: skip
+        frames = datamodule.scene.frames
+        sketch, gated = gate_sketch(frames[:-1], frames[1:], base, sketch, self.sketch_config, base_bw)
         self.targets, self.sketch_masks = target_flow(base, sketch), sketch.mask
         report = {f"target/rejected_{k}": float(v) for k, v in sketch.rejected.items()}
+        report.update({f"target/{k}": v for k, v in gated.items()})
         report["target/painted_fraction"] = sketch.mask.float().mean().item()
         gt = datamodule.scene.gt
         if gt is not None and gt.flow is not None and sketch.mask.any():

@@ -28,6 +28,8 @@ from ..metrics import sample_flow_at_points
 
 __all__ = [
     "FOOTPRINTS",
+    "GATES",
+    "GATE_LEVELS",
     "SketchConfig",
     "SketchResult",
     "footprint_offsets",
@@ -37,6 +39,8 @@ __all__ = [
 ]
 
 FOOTPRINTS = ("cross", "square", "disk")
+GATES = ("off", "photometric", "photometric+fb")
+GATE_LEVELS = ("pixel", "bone", "bone+pixel")
 _REASONS = ("confidence", "jump", "disagreement", "points")
 
 
@@ -64,6 +68,17 @@ class SketchConfig:
         max_joint_jump: a joint that moves between t and t+1 by more than this fraction of the
             person's size (the diagonal of the bounding box of the confident joints in frame t)
             is implausible: the bones touching it are not painted.
+        gate: the image-evidence gate (:mod:`lit_boot.flow.gate`, needs the frames): "off",
+            "photometric" (keep sketch pixels whose census error is at most the base flow's
+            plus ``gate_margin``) or "photometric+fb" (also keep them where the base flow fails
+            its forward-backward check; one more RAFT pass per pair).
+        gate_margin: census error units (7x7 window, 0..48) the sketch may lose by.
+        gate_level: "pixel" (each pixel on its own), "bone" (a bone's mean difference over
+            its comparable core pixels decides for all its pixels) or "bone+pixel" (both).
+        gate_core: px; a bone is judged on its pixels within this distance of its frame-t
+            segment (the limb itself, not the footprint's background).
+        gate_search: px; > 0 first shifts each bone's displacement by the integer offset
+            within +-gate_search that best explains its core pixels (0: off).
     """
 
     footprint: str = "cross"
@@ -74,6 +89,11 @@ class SketchConfig:
     max_disagreement_px: float = 12.0
     point_disagreement_factor: float = 2.0
     max_joint_jump: float = 0.35
+    gate: str = "off"
+    gate_margin: float = 1.0
+    gate_level: str = "bone"
+    gate_core: float = 3.0
+    gate_search: int = 0
 
     def __post_init__(self) -> None:
         _check_footprint(self.footprint, self.size)
@@ -82,6 +102,16 @@ class SketchConfig:
         for name in ("max_disagreement_px", "point_disagreement_factor", "max_joint_jump"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name}: expected >= 0, got {getattr(self, name)}")
+        if self.gate not in GATES:
+            raise ValueError(f"gate: expected one of {GATES}, got {self.gate!r}")
+        if self.gate_level not in GATE_LEVELS:
+            raise ValueError(f"gate_level: expected one of {GATE_LEVELS}, got {self.gate_level!r}")
+        if int(self.gate_search) != self.gate_search or self.gate_search < 0:
+            raise ValueError(f"gate_search: expected an integer >= 0, got {self.gate_search}")
+        if not self.gate_core >= 0:
+            raise ValueError(f"gate_core: expected >= 0, got {self.gate_core}")
+        if not math.isfinite(self.gate_margin):
+            raise ValueError(f"gate_margin: expected a finite number, got {self.gate_margin}")
 
 
 @dataclass
@@ -92,13 +122,18 @@ class SketchResult:
     bone_drawn: (B, E) bool, bones that passed every gate (one lying outside the image may
     still paint nothing); rejected: counts over the batch, each bone under the first failing
     reason in the order "confidence" (non-finite joints count as unconfident), "jump",
-    "disagreement"; "points" counts the samples of drawn bones dropped for disagreement.
+    "disagreement"; "points" counts the samples of drawn bones dropped for disagreement;
+    owner: (B, H, W) long, the bone (index into the bones drawn) that painted each pixel, -1
+    where unpainted, and bone_ends: (B, E, 2, 2) px, each bone's ends (a, b) in frame t (both
+    None when unknown).
     """
 
     flow: Tensor
     mask: Tensor
     bone_drawn: Tensor
     rejected: dict[str, int] = field(default_factory=lambda: dict.fromkeys(_REASONS, 0))
+    owner: Tensor | None = None
+    bone_ends: Tensor | None = None
 
 
 def _check_footprint(footprint: str, size: int) -> None:
@@ -212,9 +247,10 @@ def _sample_bones(
     return _Samples(p, q - p, depth, valid)
 
 
-def _paint(samples: _Samples, offsets: Tensor, reach: int, height: int, width: int) -> tuple[Tensor, Tensor]:
+def _paint(samples: _Samples, offsets: Tensor, reach: int, height: int, width: int) -> tuple[Tensor, Tensor, Tensor]:
     """Paint every valid sample's footprint (offsets within ``reach`` px; valid centres lie
-    within ``reach`` px of the image); per pixel the highest-priority sample wins.
+    within ``reach`` px of the image); per pixel the highest-priority sample wins. Returns
+    (flow (B, 2, H, W), mask (B, H, W), owner (B, H, W): the winner's bone, -1 unpainted).
 
     Priorities are unique integers per image (drawing order, or depth then drawing order), the
     winner is found with a scatter ``amax``: deterministic on every device.
@@ -250,7 +286,9 @@ def _paint(samples: _Samples, offsets: Tensor, reach: int, height: int, width: i
     flow = p.new_zeros(B * height * width, 2)
     flow[flat[win]] = samples.d.flatten(1, 2)[bi[win], si[win]]
     flow = flow.view(B, height, width, 2).permute(0, 3, 1, 2).contiguous()
-    return flow, (best >= 0).view(B, height, width)
+    owner = torch.full((B * height * width,), -1, dtype=torch.long, device=p.device)
+    owner[flat[win]] = si[win] // samples.valid.shape[-1]
+    return flow, (best >= 0).view(B, height, width), owner.view(B, height, width)
 
 
 def _check_inputs(joints_t: Tensor, joints_t1: Tensor, height: int, width: int, **per_joint: Tensor | None) -> None:
@@ -320,9 +358,11 @@ def sketch_flow(
     reach = int(_offsets(config.footprint, int(config.size), torch.device("cpu")).abs().max())  # px, no sync
     z = None if depths is None else depths.to(device, dtype)
     samples = _sample_bones(jt, jt1, bones, keep, z, height, width, config, reach)
+    ends = torch.stack([jt[:, bones[:, 0]], jt[:, bones[:, 1]]], 2)  # (B, E, 2, 2)
     if samples.valid.shape[-1] == 0:
         empty = jt.new_zeros(B, 2, height, width)
-        return SketchResult(empty, torch.zeros(B, height, width, dtype=torch.bool, device=device), keep, rejected)
+        nowhere = torch.zeros(B, height, width, dtype=torch.bool, device=device)
+        return SketchResult(empty, nowhere, keep, rejected, torch.full(nowhere.shape, -1, device=device), ends)
 
     if config.guard and base_flow is not None:
         N = samples.valid.shape[-1]
@@ -335,8 +375,8 @@ def sketch_flow(
         rejected["points"] = int(bad.sum())
         samples.valid = samples.valid & keep[..., None] & ~bad
 
-    flow, mask = _paint(samples, offsets, reach, height, width)
-    return SketchResult(flow, mask, keep, rejected)
+    flow, mask, owner = _paint(samples, offsets, reach, height, width)
+    return SketchResult(flow, mask, keep, rejected, owner, ends)
 
 
 def sketch_from_layout(
