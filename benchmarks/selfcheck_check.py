@@ -1,17 +1,21 @@
 """How often the flow stage's self-check (lit_boot.bootstrap.selfcheck) picks the flow that the
 ground truth says is better, per region, on seeded synthetic scenes with exact GT.
 
-For each scene: pretrained RAFT's flow (initial) and flow_1 of a bootstrap run (3D mode, self-check
-off: the tuned flow); then the self-check at each margin and tile size. Per pair and region (the
-self-check's own regions: the dilated sketch, and background tiles), GT's better flow is the one
-with the lower EPE over valid, non-occluded pixels; a region where the two differ by less than
+For each scene: pretrained RAFT's flow (initial) and flow_1 of a bootstrap run (self-check off: the
+tuned flow; synthetic scenes in 3D mode, the Sintel samples in 2D mode with MediaPipe's keypoints,
+as benchmarks/real_data.py); then the self-check at each margin and tile size. Per pair and region
+(the self-check's own: tiles, each split into its person part, inside the dilated sketch, and its
+background part), GT's better flow is the one with the lower EPE over valid, non-occluded pixels; a region where the two differ by less than
 ``--tie`` px counts as a GT tie (keeping the initial flow is then right). Agreement = regions where
 the self-check's choice is GT's better flow (ties: initial kept), over regions with GT pixels.
-EPE all / person / background (GT person mask) of initial, tuned and checked flows, pooled.
+EPE all / person / background (GT person mask; Sintel: all only, over its GT pair) of initial,
+tuned and checked flows, pooled over pixels per scene, then the mean over scenes.
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/selfcheck_check.py [--scenes 0,1,4,7] [--frames 8]
       [--height 128] [--width 256] [--epochs 4] [--margins 0,0.02,0.05] [--tiles 32,64]
+      [--sintel alley_1,market_5] [--sintel-size 218,512] [--sintel-epochs 8] [--seed 0]
+Scenes are benchmarks/bootstrap_suite.py's (index = its seed: run_s0, walk_s1, hop_bvh_s4, run_pan_s7).
 """
 
 from __future__ import annotations
@@ -56,7 +60,7 @@ def agreement(scene, initial, tuned, person, record, tile: int, tie: float) -> d
             if pixels[t, r] < 16 or name not in pair["regions"]:
                 continue
             diff = float(e_init[t, r] - e_tuned[t, r])
-            c = counts["person" if r == 0 else "background"]
+            c = counts["person" if name.startswith("person") else "background"]
             c[0] += (diff >= tie) == (name in pair["tuned"])
             c[1] += 1
             c[2] += abs(diff) < tie

@@ -28,15 +28,17 @@ def scene():
     return lit_boot.make_scene(motion="run", frames=3, height=64, width=96, seed=0)
 
 
-def test_regions_are_the_person_and_background_tiles():
+def test_regions_are_tiles_split_into_person_and_background():
     person = torch.zeros(1, 64, 96, dtype=torch.bool)
-    person[0, 10:20, 40:50] = True
+    person[0, 10:40, 40:50] = True
     labels = region_labels(person, TILE)
     names = region_names(64, 96, TILE)
-    assert names == ["person", "tile_0_0", "tile_0_1", "tile_0_2", "tile_1_0", "tile_1_1", "tile_1_2"]
-    assert (labels[person] == 0).all() and labels[0, 0, 0] == 1 and labels[0, 63, 95] == 6
-    assert names[int(labels[0, 40, 70])] == "tile_1_2"
-    assert labels[0, 19, 39] == names.index("tile_0_1") and labels[0, 19, 40] == 0
+    cells = ["0_0", "0_1", "0_2", "1_0", "1_1", "1_2"]
+    assert names == [f"tile_{c}" for c in cells] + [f"person_{c}" for c in cells]
+    assert names[int(labels[0, 0, 0])] == "tile_0_0" and names[int(labels[0, 63, 95])] == "tile_1_2"
+    assert names[int(labels[0, 20, 45])] == "person_0_1" and names[int(labels[0, 35, 45])] == "person_1_1"
+    assert names[int(labels[0, 20, 39])] == "tile_0_1"
+    assert set(labels[person].tolist()) == {names.index("person_0_1"), names.index("person_1_1")}
 
 
 def test_a_corrupted_tile_gets_the_initial_flow_and_an_exact_region_keeps_the_tuned(scene):
@@ -48,11 +50,11 @@ def test_a_corrupted_tile_gets_the_initial_flow_and_an_exact_region_keeps_the_tu
     tuned = torch.where(bad, gt + 5.0, gt)  # 5 px off in tile_1_2, exact elsewhere
     flows, record = self_check(scene.frames, initial, tuned, person, margin=0.02, tile=TILE, blend=4)
     for pair in record["per_pair"]:
-        assert "tile_1_2" not in pair["tuned"]
-        assert {"person", "tile_0_0", "tile_0_1", "tile_0_2", "tile_1_0", "tile_1_1"} <= set(pair["tuned"])
+        kept_initial = set(pair["regions"]) - set(pair["tuned"])
+        assert kept_initial == {"tile_1_2", "person_1_2"} & set(pair["regions"])  # the corrupted tile only
         err_initial, err_tuned, pixels = pair["regions"]["tile_1_2"]
         assert err_initial < err_tuned and pixels > 0
-    assert record["regions_initial"] == 2 and record["regions_tuned"] == 12 and record["person_tuned"] == 2
+    assert record["regions_initial"] >= 2 and record["person_tuned"] >= 2
     # away from the tile's border (> blend px) the output is exactly one flow or the other
     far_bad = torch.zeros_like(bad)
     far_bad[37:, 69:] = True

@@ -1,9 +1,9 @@
 """Self-check of a flow stage without ground truth: keep the tuned flow only where the frames say
 it is better than the initial flow ("do no harm", issue 13).
 
-Per pair, the frame is cut into regions: the person (the dilated sketch, as the runner's drift)
-and the rest of the frame in square tiles of ``tile`` px (a tile's person pixels belong to the
-person region). In each region the mean census error (:func:`~lit_boot.flow.evidence.photometric_error`,
+Per pair, the frame is cut into square tiles of ``tile`` px, and each tile into its person part
+(the dilated sketch, as the runner's drift) and its background part: the person is judged
+locally too, since a gain on some limbs and a loss around others would cancel in one region. In each region the mean census error (:func:`~lit_boot.flow.evidence.photometric_error`,
 7x7 soft census, 0..48) of frame t against frame t+1 warped by each flow is compared, over pixels
 valid under both flows. The tuned flow is kept only when its error is lower than
 ``(1 - margin)`` times the initial flow's (ties, empty regions and regions too small to judge
@@ -36,23 +36,28 @@ MIN_PIXELS = 16
 
 
 def region_labels(person: Tensor, tile: int) -> Tensor:
-    """Region of every pixel: 0 = person, 1 + r * nx + c = background tile (r, c) of ``tile`` px.
+    """Region of every pixel: the grid of ``tile`` px squares, each split into its person part
+    and its background part.
 
-    person: (B, H, W) bool. Returns (B, H, W) int64 with ny * nx + 1 labels, ny = ceil(H / tile),
-    nx = ceil(W / tile) (the last row / column of tiles may be narrower).
+    person: (B, H, W) bool. With ny = ceil(H / tile) and nx = ceil(W / tile) (the last row /
+    column of tiles may be narrower), pixel (y, x) in tile (r, c) = (y // tile, x // tile) gets
+    label r * nx + c (background) or ny * nx + r * nx + c (person). Returns (B, H, W) int64 with
+    2 ny nx labels (see :func:`region_names`).
     """
     _, height, width = person.shape
-    nx = math.ceil(width / tile)
+    ny, nx = math.ceil(height / tile), math.ceil(width / tile)
     rows = torch.arange(height, device=person.device) // tile
     cols = torch.arange(width, device=person.device) // tile
-    tiles = (1 + rows[:, None] * nx + cols).expand_as(person)
-    return torch.where(person, torch.zeros_like(tiles), tiles)
+    tiles = (rows[:, None] * nx + cols).expand_as(person)
+    return tiles + person.long() * ny * nx
 
 
 def region_names(height: int, width: int, tile: int) -> list[str]:
-    """Label -> name: "person", then "tile_<row>_<col>" in :func:`region_labels`' order."""
+    """Label -> name in :func:`region_labels`' order: "tile_<row>_<col>" (background), then
+    "person_<row>_<col>"."""
     ny, nx = math.ceil(height / tile), math.ceil(width / tile)
-    return ["person"] + [f"tile_{r}_{c}" for r in range(ny) for c in range(nx)]
+    cells = [f"{r}_{c}" for r in range(ny) for c in range(nx)]
+    return [f"tile_{cell}" for cell in cells] + [f"person_{cell}" for cell in cells]
 
 
 def _region_means(error: Tensor, valid: Tensor, labels: Tensor, count: int) -> tuple[Tensor, Tensor]:
@@ -110,9 +115,11 @@ def self_check(
     Returns (flows (T-1, 2, H, W) px: the initial flow blended with the tuned flow where it won,
     record): ``kept_tuned_fraction`` (mean weight of the tuned flow over all pixels),
     ``regions_tuned`` / ``regions_initial`` (counts over pairs and regions with pixels),
-    ``person_tuned`` (pairs whose person region kept the tuned flow) and ``per_pair``: for each
-    pair the tuned fraction and the lists of region names kept tuned, with each region's mean
-    census error (initial, tuned) and valid pixels.
+    ``person_tuned`` / ``person_regions`` (the same for the person's regions),
+    ``person_tuned_fraction`` (mean weight of the tuned flow on the person region) and
+    ``per_pair``: for each pair the tuned fraction, the names of the regions kept tuned, and
+    ``regions``: {name: [mean census error of the initial flow, of the tuned flow, valid pixels]}
+    for every region with pixels.
     """
     height, width = initial.shape[-2:]
     labels = region_labels(person, tile)
@@ -142,7 +149,10 @@ def self_check(
     record = {"method": "photometric", "margin": margin, "tile": tile, "blend": blend,
               "kept_tuned_fraction": float(weight.mean()), "regions_tuned": tuned_regions,
               "regions_initial": regions - tuned_regions,
-              "person_tuned": sum("person" in p["tuned"] for p in per_pair), "per_pair": per_pair}  # fmt: skip
+              "person_tuned": sum(n.startswith("person") for p in per_pair for n in p["tuned"]),
+              "person_regions": sum(n.startswith("person") for p in per_pair for n in p["regions"]),
+              "person_tuned_fraction": float(weight[person].mean()) if person.any() else 0.0,
+              "per_pair": per_pair}  # fmt: skip
     return flows, record
 
 
