@@ -5,9 +5,10 @@ For each scene: pretrained RAFT's flow (initial) and flow_1 of a bootstrap run (
 tuned flow; synthetic scenes in 3D mode, the Sintel samples in 2D mode with MediaPipe's keypoints,
 as benchmarks/real_data.py); then the self-check at each margin and tile size. Per pair and region
 (the self-check's own: tiles, each split into its person part, inside the dilated sketch, and its
-background part), GT's better flow is the one with the lower EPE over valid, non-occluded pixels; a region where the two differ by less than
-``--tie`` px counts as a GT tie (keeping the initial flow is then right). Agreement = regions where
-the self-check's choice is GT's better flow (ties: initial kept), over regions with GT pixels.
+background part), GT's better flow is the one with the lower EPE over valid, non-occluded pixels;
+a region where the two differ by less than ``--tie`` px counts as a GT tie (keeping the initial
+flow is then right). Agreement = regions where the self-check's choice is GT's better flow (ties:
+initial kept), over regions with >= 16 GT pixels.
 EPE all / person / background (GT person mask; Sintel: all only, over its GT pair) of initial,
 tuned and checked flows, pooled over pixels per scene, then the mean over scenes.
 
@@ -138,7 +139,7 @@ def main() -> None:
     p.add_argument("--tiles", default="32,64")
     p.add_argument("--blend", type=int, default=4)
     p.add_argument("--tie", type=float, default=0.005, help="px: GT EPE differences below this are ties")
-    p.add_argument("--sintel", default="alley_1,market_5", help="Sintel samples too (2D mode, MediaPipe), e.g. alley_1,market_5")
+    p.add_argument("--sintel", default="alley_1,market_5", help="Sintel samples (2D mode, MediaPipe); '' for none")
     p.add_argument("--sintel-size", default="218,512", help="H,W")
     p.add_argument("--sintel-epochs", type=int, default=8)
     p.add_argument("--seed", type=int, default=0)

@@ -3,8 +3,9 @@ it is better than the initial flow ("do no harm", issue 13).
 
 Per pair, the frame is cut into square tiles of ``tile`` px, and each tile into its person part
 (the dilated sketch, as the runner's drift) and its background part: the person is judged
-locally too, since a gain on some limbs and a loss around others would cancel in one region. In each region the mean census error (:func:`~lit_boot.flow.evidence.photometric_error`,
-7x7 soft census, 0..48) of frame t against frame t+1 warped by each flow is compared, over pixels
+locally too, since a gain on some limbs and a loss around others would cancel in one region.
+In each region the mean census error (:func:`~lit_boot.flow.evidence.photometric_error`, 7x7
+soft census, 0..48) of frame t against frame t+1 warped by each flow is compared, over pixels
 valid under both flows. The tuned flow is kept only when its error is lower than
 ``(1 - margin)`` times the initial flow's (ties, empty regions and regions too small to judge
 keep the initial flow). The binary choice map is blurred with a box of ``2 blend + 1`` px so the
