@@ -73,8 +73,8 @@ def test_gate_off_changes_nothing(scene, base):
 
 def test_a_wrong_displacement_is_rejected_and_the_target_is_the_base_there(scene, base):
     frames1, frames2 = scene.frames[:-1], scene.frames[1:]
-    right, cfg = draw(scene, base[0], gate="photometric", **GUARDLESS)
-    wrong, _ = draw(scene, base[0], shift=10.0, gate="photometric", **GUARDLESS)
+    right, cfg = draw(scene, base[0], gate="photometric", gate_level="bone", **GUARDLESS)
+    wrong, _ = draw(scene, base[0], shift=10.0, gate="photometric", gate_level="bone", **GUARDLESS)
     kept_right = gate_sketch(frames1, frames2, base[0], right, cfg)[1]["gate_kept_fraction"]
     gated, report = gate_sketch(frames1, frames2, base[0], wrong, cfg)
     assert kept_right > 0.8  # the GT joints' displacement explains the images: mostly kept
@@ -102,6 +102,17 @@ def test_pixel_level_keeps_exactly_the_pixels_the_images_prefer(scene, base):
         gated.flow.permute(0, 2, 3, 1)[gated.mask], sk.flow.permute(0, 2, 3, 1)[gated.mask])
 
 
+def test_bone_plus_pixel_keeps_the_pixels_both_levels_keep(scene, base):
+    sk, _ = draw(scene, base[0], **GUARDLESS)
+    frames1, frames2 = scene.frames[:-1], scene.frames[1:]
+    masks = {}
+    for level in ("pixel", "bone", "bone+pixel"):
+        config = SketchConfig(gate="photometric", gate_level=level)
+        masks[level] = gate_sketch(frames1, frames2, base[0], sk, config)[0].mask
+    assert torch.equal(masks["bone+pixel"], masks["bone"] & masks["pixel"])
+    assert 0 < masks["bone+pixel"].sum() < min(masks["bone"].sum(), masks["pixel"].sum())
+
+
 def test_fb_gate_also_keeps_pixels_where_the_base_fails_its_check(scene, base):
     wrong, cfg = draw(scene, base[0], shift=10.0, gate="photometric+fb", gate_level="pixel", **GUARDLESS)
     frames1, frames2 = scene.frames[:-1], scene.frames[1:]
@@ -125,7 +136,8 @@ def test_flow_ttt_gates_its_targets_and_reports_the_counts(scene, shared):
     assert bw is None  # no backward pass unless the fb gate asks for it
     report_off = off.targets_from(dm, base)
     assert not any(k.startswith("target/gate_") for k in report_off)
-    on = FlowTTT(weights=weights, train_updates=8, sketch=SketchConfig(gate="photometric+fb", **GUARDLESS))
+    gated = SketchConfig(gate="photometric+fb", gate_level="bone", **GUARDLESS)
+    on = FlowTTT(weights=weights, train_updates=8, sketch=gated)
     report = on.build_targets(dm)
     assert {f"target/{k}" for k in GATE_REPORT_KEYS} <= report.keys()
     kept = on.sketch_masks.sum() / off.sketch_masks.sum()
@@ -133,13 +145,14 @@ def test_flow_ttt_gates_its_targets_and_reports_the_counts(scene, shared):
     assert (on.sketch_masks <= off.sketch_masks).all()
     assert report["target/painted_fraction"] == pytest.approx(on.sketch_masks.float().mean().item())
     outside = ~on.sketch_masks[:, None].expand_as(base)
-    assert torch.allclose(on.targets[outside], base[outside], atol=1e-4)  # the same RAFT, run again
+    # outside the kept pixels the target is the base flow (the same RAFT, run again)
+    assert torch.allclose(on.targets[outside], base[outside], atol=1e-4)
 
 
 def test_search_recovers_a_small_displacement_error(scene, base):
     frames1, frames2 = scene.frames[:-1], scene.frames[1:]
-    wrong, cfg = draw(scene, base[0], shift=2.0, gate="photometric", **GUARDLESS)
-    searched = SketchConfig(gate="photometric", gate_search=2, **GUARDLESS)
+    wrong, cfg = draw(scene, base[0], shift=2.0, gate="photometric", gate_level="bone", **GUARDLESS)
+    searched = SketchConfig(gate="photometric", gate_level="bone", gate_search=2, **GUARDLESS)
     plain, report_plain = gate_sketch(frames1, frames2, base[0], wrong, cfg)
     fixed, report = gate_sketch(frames1, frames2, base[0], wrong, searched)
     assert report_plain["gate_search_shift_px"] == 0.0 and 1.5 < report["gate_search_shift_px"] < 2.5

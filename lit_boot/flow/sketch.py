@@ -74,7 +74,8 @@ class SketchConfig:
             its forward-backward check; one more RAFT pass per pair).
         gate_margin: census error units (7x7 window, 0..48) the sketch may lose by.
         gate_level: "pixel" (each pixel on its own), "bone" (a bone's mean difference over
-            its comparable core pixels decides for all its pixels) or "bone+pixel" (both).
+            its comparable core pixels decides for all its pixels) or "bone+pixel" (both: the
+            best measured, benchmarks/gate_check.py).
         gate_core: px; a bone is judged on its pixels within this distance of its frame-t
             segment (the limb itself, not the footprint's background).
         gate_search: px; > 0 first shifts each bone's displacement by the integer offset
@@ -90,8 +91,8 @@ class SketchConfig:
     point_disagreement_factor: float = 2.0
     max_joint_jump: float = 0.35
     gate: str = "off"
-    gate_margin: float = 1.0
-    gate_level: str = "bone"
+    gate_margin: float = 0.0
+    gate_level: str = "bone+pixel"
     gate_core: float = 3.0
     gate_search: int = 0
 
