@@ -53,7 +53,7 @@ from .evaluate import agreement, drift, flow_metrics, pose_metrics, pose_points
 from .folder import STAGE_JSON, RunFolder
 from .lock import RunLock
 from .outputs import write_outputs
-from .selfcheck import check_stage
+from .selfcheck import check_stage, summary_line
 from .stages import fine_tune_flow, make_flow_model, make_refiner, predict_flows, refine_poses_stage
 
 __all__ = ["Bootstrap", "BootstrapResult", "bootstrap", "STAGE_JSON"]
@@ -234,6 +234,7 @@ class Bootstrap:
                   "info": {"target": reports[0], "sketch": self.models[0].hparams["sketch"]}}  # fmt: skip
         if check is not None:
             record["info"]["self_check"] = check
+            print(summary_line(check), flush=True)
         return record, mean
 
     def _pose_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], PoseResult]:

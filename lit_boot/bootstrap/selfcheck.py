@@ -16,6 +16,7 @@ is exactly one of the two flows.
 - :func:`choose_regions`: the per-region decision from two error maps.
 - :func:`blend_weights`: the smooth weight map from the binary choice.
 - :func:`self_check`: all of it on a stage's flows; the checked flows and the record.
+- :func:`check_stage`: what the runner calls after a flow stage; :func:`summary_line` for the console.
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ from torch import Tensor
 
 from ..flow.evidence import photometric_error
 
-__all__ = ["SELF_CHECKS", "region_labels", "region_names", "choose_regions", "blend_weights", "self_check"]
+__all__ = ["SELF_CHECKS", "region_labels", "region_names", "choose_regions", "blend_weights", "self_check",
+           "check_stage", "summary_line"]
 
 SELF_CHECKS = ("off", "photometric")
 #: Regions with fewer valid pixels than this keep the initial flow (too little evidence).
@@ -168,3 +170,10 @@ def check_stage(config: Any, scene: Any, initial: Tensor, tuned: Tensor, person:
     flows, record = self_check(scene.frames, initial, tuned, person, config.self_check_margin,
                                config.self_check_tile, config.self_check_blend)  # fmt: skip
     return flows, {**record, "tuned_metrics": flow_metrics(scene, tuned)}
+
+
+def summary_line(record: dict) -> str:
+    """One line for the console: how much of the tuned flow the self-check kept."""
+    return (f"  self-check: kept the tuned flow on {100 * record['kept_tuned_fraction']:.0f}% of the pixels "
+            f"({record['regions_tuned']} of {record['regions_tuned'] + record['regions_initial']} regions; "
+            f"person {record['person_tuned']} of {record['person_regions']}), the initial flow elsewhere")
