@@ -16,6 +16,8 @@ Usage:
   OMP_NUM_THREADS=1 python benchmarks/selfcheck_check.py [--scenes 0,1,4,7] [--frames 8]
       [--height 128] [--width 256] [--epochs 4] [--margins 0,0.02,0.05] [--tiles 32,64]
       [--sintel alley_1,market_5] [--sintel-size 218,512] [--sintel-epochs 8] [--seed 0]
+  OMP_NUM_THREADS=1 python benchmarks/selfcheck_check.py --suite [--scenes 0,1,4,7] [--suite-epochs 8]
+      (the whole method with self_check photometric, the bootstrap suite's settings at --frames 8)
 Scenes are benchmarks/bootstrap_suite.py's (index = its seed: run_s0, walk_s1, hop_bvh_s4, run_pan_s7).
 """
 
@@ -128,6 +130,27 @@ def report(runs: dict, args) -> None:
         print(f"{group:9s} tile {tile:3d} margin {margin:.2f}: {agree}  {e}")
 
 
+def suite(args) -> None:
+    """The whole method (flow -> pose -> flow, the suite's settings) with the self-check on: EPE
+    and MPJPE per stage, to set against BENCHMARKS.md's bootstrap suite table (self-check off)."""
+    keys = ("epe", "epe_person", "epe_background", "mpjpe_mm")
+    print("\n| scene | EPE all RAFT -> c1 -> c2 | person | background | MPJPE init -> refined | kept tuned c1, c2 |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for i in [int(s) for s in args.scenes.split(",") if s]:
+        name, spec = SCENES[i]
+        scene = make_scene(frames=args.frames, height=args.height, width=args.width, **spec)
+        out = Path(args.out) / f"{name}_suite"
+        shutil.rmtree(out, ignore_errors=True)
+        result = Bootstrap(scene, out, flow={"weights": args.weights}, flow_epochs=args.suite_epochs, video=False,
+                           progress_bar=False, self_check="photometric").run()  # fmt: skip
+        st = {r["stage"]: r for r in result.history}
+        stages = ("initial", "flow_1", "flow_2")
+        cells = [" -> ".join(f"{st[s].get(k, float('nan')):.3f}" for s in stages) for k in keys[:3]]
+        mpjpe = f"{st['initial'].get(keys[3], float('nan')):.1f} -> {st['pose_1'].get(keys[3], float('nan')):.1f}"
+        kept = ", ".join(f"{st[s]['info']['self_check']['kept_tuned_fraction']:.2f}" for s in ("flow_1", "flow_2"))
+        print(f"| {name} | {' | '.join(cells)} | {mpjpe} | {kept} |", flush=True)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", default="0,1,4,7")
@@ -142,11 +165,15 @@ def main() -> None:
     p.add_argument("--sintel", default="alley_1,market_5", help="Sintel samples (2D mode, MediaPipe); '' for none")
     p.add_argument("--sintel-size", default="218,512", help="H,W")
     p.add_argument("--sintel-epochs", type=int, default=8)
+    p.add_argument("--suite", action="store_true", help="instead: the whole method with the self-check on")
+    p.add_argument("--suite-epochs", type=int, default=8)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))
     p.add_argument("--out", default="/tmp/selfcheck_check")
     args = p.parse_args()
     print(f"settings: {vars(args)}", flush=True)
+    if args.suite:
+        return suite(args)
     runs = {}
     for i in [int(s) for s in args.scenes.split(",") if s]:
         name, spec = SCENES[i]
