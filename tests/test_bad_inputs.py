@@ -24,6 +24,7 @@ import pytest
 import torch
 from torchvision.models.optical_flow import raft_large, raft_small
 
+import lit_boot
 from lit_boot.bootstrap import BootstrapConfig
 from lit_boot.cli import main
 from lit_boot.core import Scene
@@ -137,8 +138,9 @@ def _run_folder(src: Path, out: Path, config: str, shared: Path) -> list[str]:
     return _bootstrap(src / "scene", out / "run", "--flow.weights", str(shared / "checkpoints" / "raft-small.pth"))
 
 
-def _other_settings(src: Path) -> str:
-    return json.dumps({"scene": str(src / "scene"), "config": {**BootstrapConfig().to_dict(), "cycles": 2}})
+def _other_settings(src: Path, version: str = lit_boot.__version__) -> str:
+    return json.dumps({"lit_boot": version, "scene": str(src / "scene"),
+                       "config": {**BootstrapConfig().to_dict(), "cycles": 2}})  # fmt: skip
 
 
 @dataclass
@@ -262,6 +264,9 @@ ROWS = {
     "run-folder-other-settings": Row(lambda s, o, m, sh: _run_folder(s, o, _other_settings(s), sh),
                                      (r"out/run: holds a run with other settings \(cycles.* differ\)",),
                                      shared=True),
+    "run-folder-other-version": Row(lambda s, o, m, sh: _run_folder(s, o, _other_settings(s, "0.0.1"), sh),
+                                    (r"out/run: holds a run with other settings \(lit-boot version \(0\.0\.1, now ",),
+                                    shared=True),
     "run-folder-corrupt-config": Row(lambda s, o, m, sh: _run_folder(s, o, "{not json", sh),
                                      (r"out/run: holds a run with other settings",), shared=True),
     "run-folder-config-not-an-object": Row(lambda s, o, m, sh: _run_folder(s, o, "[1, 2]", sh),

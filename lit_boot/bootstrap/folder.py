@@ -129,6 +129,10 @@ class RunFolder:
 
 
 def _differences(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
-    """The config keys whose values differ, or ["scene"]."""
+    """What differs: the lit-boot version that made the run, the scene, the config keys."""
     a, b = old["config"], new["config"]
-    return sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k)) or ["scene"]
+    made_by = [f"lit-boot version ({old.get('lit_boot', 'unknown')}, now {new['lit_boot']})"] \
+        if old.get("lit_boot") != new.get("lit_boot") else []  # fmt: skip
+    scene = ["scene"] if old.get("scene") != new.get("scene") else []
+    keys = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+    return made_by + scene + keys or sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))

@@ -40,6 +40,7 @@ import numpy as np
 import torch
 from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
+from .. import __version__
 from ..core import Scene
 from ..data import load_scene
 from ..data.atomic import atomic_write_bytes
@@ -156,7 +157,7 @@ class Bootstrap:
     # --- inputs and settings: checked before anything is written ----------------------------------
     def _settings(self) -> dict[str, Any]:
         scene = str(self.scene_arg) if not isinstance(self.scene_arg, Scene) else f"<Scene {self.scene_arg.name}>"
-        return {"scene": scene, "config": self.config.to_dict()}
+        return {"lit_boot": __version__, "scene": scene, "config": self.config.to_dict()}
 
     def _inputs(self) -> Scene:
         """The scene (loaded, checked for the mode) with the pose ensemble averaged in."""
