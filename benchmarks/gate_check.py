@@ -13,8 +13,9 @@ non-occluded pixels (Sintel: valid only):
 - target EPE on the region the ungated sketch paints (px; "do no harm": at most the base's,
   which is the "base" column of the off row).
 
-With ``--finetune N``: also the person EPE (synthetic) or all-pixel EPE (Sintel) after N epochs
-of FlowTTT on the "off" and on the ``--finetune-variants`` targets (slow on CPU).
+With ``--finetune N``: also the person EPE (synthetic) and the all-pixel EPE (valid pixels,
+occluded ones included) after N epochs of FlowTTT on the "off" and the ``--finetune-variants``
+targets (slow on CPU); each scene's line ends with pretrained RAFT's.
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/gate_check.py [--size 256] [--frames 5] [--scenes 4] [--updates 20]
@@ -81,13 +82,14 @@ def sums(model: FlowTTT, dm: SceneFlowData, base: torch.Tensor, ungated: torch.T
             "target_region": err(model.targets, before), "base_region": err(base, before)}  # fmt: skip
 
 
-def finetune(model: FlowTTT, dm: SceneFlowData, epochs: int) -> float:
-    """Person EPE (synthetic) or all-pixel EPE after ``epochs`` of FlowTTT on the set targets."""
+def finetune(model: FlowTTT, dm: SceneFlowData, epochs: int) -> tuple[float, float]:
+    """(person EPE (NaN without a person mask), all-pixel EPE) after ``epochs`` of FlowTTT on
+    the set targets."""
     trainer = L.Trainer(max_epochs=epochs, logger=False, enable_checkpointing=False, enable_progress_bar=False,
                         enable_model_summary=False, num_sanity_val_steps=0, check_val_every_n_epoch=epochs)  # fmt: skip
     trainer.fit(model, datamodule=dm)
     m = trainer.callback_metrics
-    return float(m.get("val/epe_person", m.get("val/epe", float("nan"))))
+    return float(m.get("val/epe_person", float("nan"))), float(m["val/epe"])
 
 
 def run_scene(name: str, dm: SceneFlowData, args, table: dict[str, dict[str, float]]) -> None:
@@ -108,20 +110,20 @@ def run_scene(name: str, dm: SceneFlowData, args, table: dict[str, dict[str, flo
         if args.finetune and (key == "off" or key in args.finetune_variants):
             model.raft.load_state_dict(state)
             model.original = None
-            s["after"], s["runs"] = finetune(model, dm, args.finetune), 1.0
+            (s["after"], s["after_all"]), s["runs"] = finetune(model, dm, args.finetune), 1.0
         for k, v in s.items():
             table.setdefault(key, {})[k] = table.get(key, {}).get(k, 0.0) + v
         print_row(f"{name} {key}", s)
     gt = dm.scene.gt
     valid = gt.flow_valid if gt.flow_valid is not None else torch.ones_like(gt.flow[:, 0], dtype=torch.bool)
     person = valid & gt.person_mask[:-1] if gt.person_mask is not None else valid
-    before = float((base - gt.flow).norm(dim=1)[person].mean())
-    print(f"  ({name}: {time.time() - t0:.0f} s; pretrained RAFT's EPE on the person (or all): {before:.3f})", flush=True)
+    epe = [float((base - gt.flow).norm(dim=1)[m].mean()) for m in (person, valid)]
+    print(f"  ({name}: {time.time() - t0:.0f} s; pretrained RAFT's EPE person, all: {epe[0]:.3f} {epe[1]:.3f})")
 
 
 def print_row(label: str, s: dict[str, float]) -> None:
     r = lambda a, b: s[a] / s[b] if s[b] else float("nan")  # noqa: E731
-    after = f"  {s['after'] / s['runs']:.3f}" if "after" in s else ""
+    after = f"  {s['after'] / s['runs']:.3f} {s['after_all'] / s['runs']:.3f}" if "after" in s else ""
     print(f"{label:<44} {r('painted', 'pixels'):7.4f} {r('painted', 'before'):6.3f} {r('sketch', 'painted'):7.3f} "
           f"{r('base', 'painted'):7.3f} {r('target_region', 'before'):7.3f} {r('base_region', 'before'):7.3f}{after}",
           flush=True)  # fmt: skip
@@ -162,7 +164,7 @@ def main() -> None:
     torch.manual_seed(0)
     print(f"settings: {vars(args)}")
     print(f"{'scene / variant':<44} painted   kept  sketch    base  target  base    (EPE px; last two: on the "
-          "ungated sketch's pixels)" + ("  after" if args.finetune else ""))  # fmt: skip
+          "ungated sketch's pixels)" + ("  after: person, all" if args.finetune else ""))  # fmt: skip
     for part, scenes in (("synth", synth_scenes), ("sintel", sintel_scenes)):
         if part not in args.parts:
             continue
