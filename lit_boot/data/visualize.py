@@ -13,8 +13,6 @@ import cv2
 import numpy as np
 import torch
 from PIL import ImageColor
-from torchvision.transforms.functional import rgb_to_grayscale
-from torchvision.utils import draw_keypoints, flow_to_image
 
 from ..core.joints import JointLayout, get_layout
 from ..core.scene import Scene
@@ -39,6 +37,8 @@ def flow_image(flow: torch.Tensor, max_magnitude: float | None = None) -> torch.
         return torch.stack([flow_image(f, max_magnitude) for f in flow])
     if flow.ndim != 3 or flow.shape[0] != 2:
         raise ValueError(f"flow_image: expected flow of shape (2, H, W) or (B, 2, H, W), got {tuple(flow.shape)}")
+    from torchvision.utils import flow_to_image  # here, not at import: the CLI's help stays light
+
     flow = flow.detach().float()
     if max_magnitude is None:
         return flow_to_image(flow)
@@ -99,6 +99,8 @@ def draw_skeleton(
     finite = torch.isfinite(points).all(-1)
     visible = finite if conf is None else finite & (conf > threshold)
     points = torch.where(finite[:, None], points, torch.zeros_like(points)).round()
+    from torchvision.utils import draw_keypoints
+
     canvas = torch.zeros(image.shape, dtype=torch.uint8)
     marks = draw_keypoints(
         canvas, points[None], connectivity=list(layout.sketch_bones), colors="white",
@@ -162,6 +164,8 @@ def scene_preview(scene: Scene, index: int = 0) -> torch.Tensor:
         flow = gt.flow[index] if valid is None else gt.flow[index] * valid  # invalid pixels: white (no motion)
         middle = flow_image(flow).to(frame.device)
     else:
+        from torchvision.transforms.functional import rgb_to_grayscale
+
         middle = rgb_to_grayscale(frame, num_output_channels=3)
     right = frame
     if scene.keypoints2d is not None:
