@@ -10,9 +10,9 @@
 This is where lit_boot.flow and lit_boot.pose meet.
 """
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from .._lazy import lazy_attributes
 from .config import DRIFT_GUARDS, MODES, PRESETS, BootstrapConfig
 
 if TYPE_CHECKING:
@@ -24,14 +24,7 @@ _LAZY = {**dict.fromkeys(["agreement", "drift", "flow_metrics", "pose_metrics", 
          **dict.fromkeys(["Bootstrap", "BootstrapResult", "bootstrap"], ".runner")}
 
 
-def __getattr__(name: str) -> Any:
-    if name not in _LAZY:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(_LAZY[name], __name__), name)
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "Bootstrap",

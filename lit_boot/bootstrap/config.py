@@ -21,12 +21,13 @@ import copy
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from .selfcheck import SELF_CHECKS
 
 __all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "BootstrapConfig"]
 
 MODES = ("3d", "2d")
 DRIFT_GUARDS = ("record", "stop", "rollback")
+#: The flow stages' self-check against the frames (see :mod:`lit_boot.bootstrap.selfcheck`).
+SELF_CHECKS = ("off", "photometric")
 
 #: Per preset and mode: FlowTTT arguments, refiner arguments, options of the orchestrator.
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {

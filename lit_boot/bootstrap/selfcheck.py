@@ -29,11 +29,11 @@ import torch
 from torch import Tensor
 
 from ..flow.evidence import photometric_error
+from .config import SELF_CHECKS
 
 __all__ = ["SELF_CHECKS", "region_labels", "region_names", "choose_regions", "blend_weights", "self_check",
            "check_stage", "summary_line"]
 
-SELF_CHECKS = ("off", "photometric")
 #: Regions with fewer valid pixels than this keep the initial flow (too little evidence).
 MIN_PIXELS = 16
 

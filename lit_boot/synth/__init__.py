@@ -7,9 +7,9 @@ and simulated METRO-like and DCPose-like estimates. The settings (:class:`SynthC
 :class:`EstimateConfig`) import without torch; the rest loads on first use.
 """
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from .._lazy import lazy_attributes
 from .config import MOTION_KINDS, EstimateConfig, SynthConfig
 
 if TYPE_CHECKING:
@@ -35,11 +35,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    if name not in _LAZY:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(_LAZY[name], __name__), name)
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
