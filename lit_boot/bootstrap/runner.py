@@ -13,7 +13,8 @@ A run folder (the input scene folder is never written)::
     poses.npz, poses.json  the final refined poses (see lit_boot.pose.PoseResult)
     raft_finetuned.pt      the final fine-tuned RAFT weights (torchvision format)
     summary.json           settings, device, every metric per stage, timings, guard events
-    metrics.png            the metrics per stage; overlay.mp4: frame, flows (RAFT, refined, GT), EPE change, skeletons (see overlay.py)
+    metrics.png            the metrics per stage
+    overlay.mp4            frame, flows (RAFT, refined, GT), EPE change, skeletons (overlay.py)
     logs/tensorboard/, logs/csv/   per stage (training curves) and "summary" (per stage)
 
 Faults. Every file is written atomically and a stage's stage.json last, so a run killed at any
