@@ -96,6 +96,15 @@ class GroundTruth:
     person_mask: torch.Tensor | None = None
     keypoints2d: torch.Tensor | None = None
 
+    def flow_mask(self) -> torch.Tensor | None:
+        """Where a flow is scored against ``flow`` (lit-boot's one convention, for FlowTTT's
+        validation and the orchestrator's metrics alike): valid and not occluded, (T-1, H, W)
+        bool; None without a GT flow. (Sintel's "all" counts the occluded pixels too.)"""
+        if self.flow is None:
+            return None
+        mask = self.flow_valid if self.flow_valid is not None else torch.ones_like(self.flow[:, 0], dtype=torch.bool)
+        return mask & ~self.flow_occluded if self.flow_occluded is not None else mask
+
     def validate(self, T: int, H: int, W: int, keypoints_layout: str = "coco17") -> None:
         """Check every present field against the scene's T, H, W and keypoint layout."""
         try:

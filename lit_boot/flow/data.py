@@ -78,8 +78,8 @@ def sketch_inputs(scene: Scene, source: str = "auto", poses: torch.Tensor | None
 
 class ScenePairs(Dataset):
     """Pairs (t, t+1) of one scene as dicts: image1, image2 (3, H, W) uint8, index; and gt_flow
-    (2, H, W), gt_valid (H, W), person (H, W), gt_joints (J, 2) at t and gt_joints_next at t+1
-    when the scene has them."""
+    (2, H, W), gt_valid (H, W: where the flow is scored, GroundTruth.flow_mask), person (H, W),
+    gt_joints (J, 2) at t and gt_joints_next at t+1 when the scene has them."""
 
     def __init__(self, scene: Scene):
         self.scene = scene
@@ -93,8 +93,7 @@ class ScenePairs(Dataset):
         gt = s.gt
         if gt is not None and gt.flow is not None:
             item["gt_flow"] = gt.flow[i].float()
-            valid = gt.flow_valid[i] if gt.flow_valid is not None else torch.ones(s.height, s.width, dtype=torch.bool)
-            item["gt_valid"] = valid
+            item["gt_valid"] = gt.flow_mask()[i]  # valid and not occluded, as the orchestrator scores
         if gt is not None and gt.person_mask is not None:
             item["person"] = gt.person_mask[i]
         if gt is not None and gt.joints2d is not None:
