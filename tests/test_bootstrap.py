@@ -156,15 +156,54 @@ def test_interrupted_run_resumes_after_the_last_finished_stage(shared, tiny_scen
 
 
 @pytest.mark.shared
-def test_drift_guard_rolls_back_a_stage_that_worsens_the_agreement(shared, tiny_scene, tmp_path, monkeypatch):
-    values = iter([1.0, 0.5, 2.0, 0.1])  # initial, flow_1 (better), pose_1 (worse), flow_2 (never run)
-    monkeypatch.setattr(runner_module, "agreement", lambda *a, **k: next(values))
-    result = bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, drift_guard="rollback", **FAST)
+def test_drift_guard_rolls_back_a_stage_that_worsens_the_image_evidence(shared, tiny_scene, tmp_path, monkeypatch,
+                                                                        capsys):
+    photo = iter([1.0, 0.9])  # initial, flow_1: the flow explains the frames better
+    tracks = iter([1.0, 1.2])  # initial, pose_1: the joint tracks 20% worse
+    monkeypatch.setattr(runner_module, "photo_error", lambda *a, **k: next(photo))
+    monkeypatch.setattr(runner_module, "pose_track_error", lambda *a, **k: next(tracks))
+    result = bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, drift_guard="rollback",
+                       drift_tolerance=0.1, **FAST)  # fmt: skip
     assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1"]
     assert result.history[-1]["rolled_back"] and result.poses is None
     assert torch.equal(result.scene.joints3d, tiny_scene.joints3d)  # the pose stage's output discarded
     summary = json.loads((tmp_path / "run/summary.json").read_text())
-    assert summary["drift_guard_events"][0]["stage"] == "pose_1"
+    assert summary["drift_guard_events"] == [{"stage": "pose_1", "guard": "drift", "evidence": "track_error",
+                                              "before": 1.0, "after": 1.2, "action": "rollback"}]  # fmt: skip
+    assert "joint tracks' census error rose 1.000 -> 1.200; pose_1 rolled back" in capsys.readouterr().out
+
+
+def test_drift_guard_tolerance_and_record(tmp_path):
+    from lit_boot.bootstrap.guard import drift_guard
+
+    history = [{"stage": "initial", "kind": "initial", "photo_error": 10.0, "track_error": 5.0},
+               {"stage": "flow_1", "kind": "flow", "photo_error": 20.0, "rolled_back": True}]  # fmt: skip
+    flow = {"stage": "flow_2", "kind": "flow", "photo_error": 10.4}
+    # compared with the last kept stage that has the figure (the rolled-back flow_1 does not count)
+    assert drift_guard(BootstrapConfig(drift_guard="stop", drift_tolerance=0.05), flow, history) is None
+    event = drift_guard(BootstrapConfig(drift_guard="stop", drift_tolerance=0.03), flow, history)
+    assert event == {"guard": "drift", "evidence": "photo_error", "before": 10.0, "after": 10.4, "action": "stop"}
+    assert drift_guard(BootstrapConfig(drift_guard="record"), flow, history) is None
+    with pytest.raises(ValueError, match="drift_tolerance"):
+        BootstrapConfig(drift_tolerance=-0.1)
+
+
+@pytest.mark.shared
+def test_stage_records_hold_the_image_evidence(shared, tiny_scene, tmp_path):
+    from lit_boot.bootstrap.evaluate import photo_error, pose_track_error
+
+    result = bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, cycles=0, **FAST)
+    initial, flow_1 = result.history
+    assert 0 < flow_1["photo_error"] < 48 and 0 < initial["track_error"] < 48
+    # the GT flow explains the frames better than zero motion, the GT joint tracks better than
+    # the same tracks with 2 px of jitter
+    gt = tiny_scene.gt
+    frames = tiny_scene.frames
+    assert photo_error(frames, gt.flow) < photo_error(frames, torch.zeros_like(gt.flow))
+    joints = gt.joints2d.float()
+    keep = torch.ones(joints.shape[:2], dtype=torch.bool)
+    jitter = joints + 2 * torch.randn(joints.shape, generator=torch.Generator().manual_seed(0))
+    assert pose_track_error(frames, joints, keep) < pose_track_error(frames, jitter, keep) - 2
 
 
 @pytest.mark.shared

@@ -11,6 +11,11 @@
   inside the image.
 - Drift: the mean distance (px) between a stage's flow and the initial flow outside the
   person (the sketch dilated), which needs no ground truth either.
+- Image evidence, no ground truth (what the drift guard compares): ``photo_error``, the mean
+  soft census error (7x7, 0..48) of frame t against frame t+1 warped by the flow, over the pixels
+  whose target lies in the image; ``track_error``, the mean soft census distance between each
+  confident pose joint's neighbourhood in frame t and its neighbourhood at the joint's position
+  in frame t+1 (:func:`~lit_boot.flow.evidence.track_error`). Lower is better for both.
 
 EPE-like means pool every selected pixel (or joint) of every pair, not per pair first.
 """
@@ -20,9 +25,10 @@ from __future__ import annotations
 import torch
 
 from ..core import Scene, get_layout
+from ..flow.evidence import photometric_error, track_error
 from ..metrics import acceleration_error, epe_at_points, flow_errors, mpjpe, pa_mpjpe
 
-__all__ = ["pose_points", "flow_metrics", "pose_metrics", "agreement", "drift"]
+__all__ = ["pose_points", "flow_metrics", "pose_metrics", "agreement", "drift", "photo_error", "pose_track_error"]
 
 
 def pose_points(scene: Scene, mode: str, threshold: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
@@ -67,9 +73,7 @@ def flow_metrics(scene: Scene, flows: torch.Tensor) -> dict[str, float]:
     if gt is None or gt.flow is None:
         return {}
     flows = flows.float()
-    valid = gt.flow_valid if gt.flow_valid is not None else torch.ones(flows.shape[0], *flows.shape[-2:], dtype=torch.bool)
-    if gt.flow_occluded is not None:
-        valid = valid & ~gt.flow_occluded
+    valid = gt.flow_mask()
     out = {"epe": float(flow_errors(flows, gt.flow.float(), valid)["epe"])}
     if gt.person_mask is not None:
         person = gt.person_mask[:-1]
@@ -118,3 +122,28 @@ def drift(flows: torch.Tensor, initial: torch.Tensor, person: torch.Tensor) -> f
     if not n:
         return float("nan")
     return float((flows.float() - initial.float()).norm(dim=1)[outside].sum() / n)
+
+
+@torch.no_grad()
+def photo_error(frames: torch.Tensor, flows: torch.Tensor) -> float:
+    """Mean census error (0..48) of ``flows`` (T-1, 2, H, W) px on ``frames`` (T, 3, H, W)
+    uint8, pooled over the pixels of every pair whose target is in the image; NaN if none."""
+    total, count = 0.0, 0
+    for t in range(flows.shape[0]):  # one pair at a time: census maps are 49 channels deep
+        error, valid = photometric_error(frames[t : t + 1], frames[t + 1 : t + 2], flows[t : t + 1].float())
+        total, count = total + float(error[valid].sum()), count + int(valid.sum())
+    return total / count if count else float("nan")
+
+
+@torch.no_grad()
+def pose_track_error(frames: torch.Tensor, points: torch.Tensor, keep: torch.Tensor) -> float:
+    """Mean census distance (0..48) along the pose's joint tracks: ``points`` (T, K, 2) px,
+    ``keep`` (T, K) bool (a joint counts in a pair when kept in both frames and inside both
+    images); NaN when no joint counts."""
+    total, count = 0.0, 0
+    for t in range(frames.shape[0] - 1):
+        error, valid = track_error(frames[t : t + 1], frames[t + 1 : t + 2], points[t : t + 1].float(),
+                                   points[t + 1 : t + 2].float())  # fmt: skip
+        valid = valid[0] & keep[t] & keep[t + 1]
+        total, count = total + float(error[0][valid].sum()), count + int(valid.sum())
+    return total / count if count else float("nan")

@@ -25,11 +25,12 @@ from .overlay import overlay_frames, video_fps
 __all__ = ["before_after", "metrics_table", "overlay_frames", "plot_history", "video_fps", "write_video"]
 
 _NOT_METRICS = ("stage", "kind", "cycle")
-_UNITS = (("_mm_per_frame2", "mm/frame²"), ("_px", "px"), ("_mm", "mm"))
+_UNITS = (("_mm_per_frame2", "mm/frame²"), ("_px", "px"), ("_mm", "mm"), ("_error", "of 48"))
 
 
 def _unit(metric: str) -> str:
-    """Unit from the name: ``*_px`` px, ``*_mm`` mm, ``*_mm_per_frame2`` mm/frame², ``epe*`` px."""
+    """Unit from the name: ``*_px`` px, ``*_mm`` mm, ``*_mm_per_frame2`` mm/frame², ``epe*`` px,
+    ``*_error`` "of 48" (a census error)."""
     for suffix, unit in _UNITS:
         if metric.endswith(suffix):
             return unit
@@ -57,6 +58,10 @@ METRIC_LEGEND = (
     (("agreement_px",),
      "flow-pose agreement: the L_opt residual of the current poses under the current flow "
      "(self-consistency, not accuracy; needs no GT)"),
+    (("photo_error",),
+     "image evidence: census error of frame t against frame t+1 warped by the flow (0..48; needs no GT)"),
+    (("track_error",),
+     "image evidence: census error along the joint tracks from frame t to t+1 (0..48; needs no GT)"),
     (("drift_px",),
      "how far the flow outside the person moved from RAFT's (needs no GT; 0 before by definition; "
      "a diagnostic, neither better nor worse)"),

@@ -13,6 +13,7 @@ runs on the inputs' device and is differentiable w.r.t. float inputs and flows.
   steps for any candidate flow.
 - :func:`forward_backward_check` flags pixels whose forward and backward flows disagree
   (Sundaram et al. 2010; UnFlow's defaults): occluded or wrong.
+- :func:`track_error` scores point tracks (e.g. pose joints from frame t to t+1) the same way.
 - :func:`region_mean` and :func:`tile_mean` average a per-pixel map over masks or tiles.
 - :func:`pair_evidence` bundles them into an :class:`Evidence`.
 """
@@ -37,6 +38,7 @@ __all__ = [
     "region_mean",
     "ssim_error",
     "tile_mean",
+    "track_error",
     "to_unit_float",
     "warp",
 ]
@@ -170,6 +172,32 @@ def photometric_error(
     if measure == "census":
         return census_error(image1, warped, radius), valid
     return ssim_error(image1, warped, ssim_window), valid
+
+
+def track_error(image1: Tensor, image2: Tensor, points1: Tensor, points2: Tensor, radius: int = 3) -> tuple[Tensor, Tensor]:
+    """How badly point tracks explain two frames: the soft census distance (as
+    :func:`census_error`) between the signature at ``points1`` in ``image1`` and at ``points2``
+    in ``image2``, both sampled bilinearly.
+
+    image1, image2: (B, 3, H, W) uint8 or float 0..1; points1, points2: (B, K, 2) px (x, y),
+    pixel centres at integer coordinates. Returns (error (B, K) in [0, (2r+1)^2 - 1), valid
+    (B, K) bool = both points inside their images and finite). Lower is better.
+    """
+    _check("image1", image1, 3)
+    _check("image2", image2, 3)
+    height, width = image1.shape[-2:]
+
+    def sample(image: Tensor, points: Tensor) -> tuple[Tensor, Tensor]:
+        inside = (points[..., 0] >= 0) & (points[..., 0] <= width - 1) & (points[..., 1] >= 0)
+        inside = inside & (points[..., 1] <= height - 1)
+        grid = torch.nan_to_num(points.float(), 0.0) * 2 / points.new_tensor([max(width - 1, 1), max(height - 1, 1)]) - 1
+        signature = F.grid_sample(census_transform(image, radius), grid[:, :, None].float(), align_corners=True)
+        return signature[..., 0], inside
+
+    s1, in1 = sample(image1, points1)
+    s2, in2 = sample(image2, points2)
+    d2 = (s1 - s2).square()
+    return (d2 / (0.1 + d2)).sum(1), in1 & in2
 
 
 def forward_backward_check(
