@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from lit_boot.bootstrap.overlay import flow_colour_scale, overlay_frames, video_fps
+from lit_boot.bootstrap.overlay import _legend, flow_colour_scale, overlay_frames, video_fps
 from lit_boot.bootstrap.report import write_video
 from lit_boot.data import flow_image
 
@@ -122,3 +122,22 @@ def test_gt_shapes_are_checked() -> None:
         overlay_frames(frames, flow, flow, None, None, None, gt_flow=flow, gt_valid=torch.ones(T - 1, H, W))
     with pytest.raises(ValueError, match="gt_valid given without gt_flow"):
         overlay_frames(frames, flow, flow, None, None, None, gt_valid=torch.ones(T - 1, H, W, dtype=torch.bool))
+
+
+def test_decision_panel_replaces_the_frame_and_gets_a_legend_line() -> None:
+    frames = torch.full((T, 3, H, W), 100, dtype=torch.uint8)
+    flow = uniform_flow(T - 1, 1.0, 0.0)
+    painted = torch.zeros(T - 1, H, W, dtype=torch.bool)
+    painted[:, 25:35, 10:20] = True
+    kept = torch.zeros(T - 1, H, W)
+    kept[..., 30:] = 1.0
+    plain = overlay_frames(frames, flow, flow, None, None, None, legend=False)
+    shown = overlay_frames(frames, flow, flow, None, None, None, legend=False,
+                           decisions={"painted": painted, "kept": kept})  # fmt: skip
+    panel = grid(shown[0], 2)[0][0]
+    assert (panel[:, 25:35, 10:20] == torch.tensor([255, 140, 0]).view(3, 1, 1)).all()  # painted: orange
+    assert (panel[2, 25:, 40:] > panel[0, 25:, 40:]).all()  # tuned kept: blue tint
+    assert (panel[0, 25:, :5] == panel[2, 25:, :5]).all()  # RAFT kept: grey
+    assert torch.equal(grid(shown[0], 2)[0][1], grid(plain[0], 2)[0][1])  # the other panels as before
+    rows = _legend(4000, 400, 1.0, None).shape[0]
+    assert _legend(4000, 400, 1.0, None, decisions=True).shape[0] == rows + round(34 * 1.0)  # one more line

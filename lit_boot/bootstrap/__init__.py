@@ -17,11 +17,12 @@ from .config import DRIFT_GUARDS, MODES, PRESETS, BootstrapConfig
 
 if TYPE_CHECKING:
     from .evaluate import agreement, drift, flow_metrics, pose_metrics, pose_points
-    from .runner import Bootstrap, BootstrapResult, bootstrap
+    from .result import BootstrapResult
+    from .runner import Bootstrap, bootstrap
 
 #: Names imported on first use: the runner pulls Lightning, and the CLI's help needs only the config.
 _LAZY = {**dict.fromkeys(["agreement", "drift", "flow_metrics", "pose_metrics", "pose_points"], ".evaluate"),
-         **dict.fromkeys(["Bootstrap", "BootstrapResult", "bootstrap"], ".runner")}
+         **dict.fromkeys(["Bootstrap", "bootstrap"], ".runner"), "BootstrapResult": ".result"}
 
 
 __getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())

@@ -1,5 +1,6 @@
 """What a bootstrap run shows while it runs: one header line per stage, and pictures per stage
-in TensorBoard (the flow of the middle pair in colour, the skeleton on its first frame)."""
+in TensorBoard (the flow of the middle pair in colour, the skeleton on its first frame, and what
+the flow stage decided there: painted target pixels, where the tuned flow was kept)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from lightning.pytorch.loggers import TensorBoardLogger
 
 from ..core import Scene
 from ..data import draw_skeleton, flow_image
+from .decisions import decision_image
 from .evaluate import pose_points
 
 __all__ = ["stage_header", "log_stage_images"]
@@ -19,8 +21,11 @@ def stage_header(index: int, total: int, name: str, what: str) -> str:
 
 
 @torch.no_grad()
-def log_stage_images(loggers: list, step: int, stage: str, scene: Scene, flows: torch.Tensor, mode: str) -> None:
-    """Add the middle pair's flow colour image and the current skeleton on its first frame
+def log_stage_images(
+    loggers: list, step: int, stage: str, scene: Scene, flows: torch.Tensor, mode: str, decisions: dict | None = None
+) -> None:
+    """Add the middle pair's flow colour image, the current skeleton on its first frame and,
+    for a flow stage, its decision map (:func:`~lit_boot.bootstrap.decisions.decision_image`)
     (3, H, W uint8 each) to every TensorBoard logger, at ``step``, tagged by ``stage``."""
     tensorboards = [lg for lg in loggers if isinstance(lg, TensorBoardLogger)]
     if not tensorboards:
@@ -32,3 +37,6 @@ def log_stage_images(loggers: list, step: int, stage: str, scene: Scene, flows: 
     for logger in tensorboards:
         logger.experiment.add_image(f"flow/{stage}", flow_image(flows[t].float()), step)
         logger.experiment.add_image(f"skeleton/{stage}", skeleton, step)
+        if decisions is not None and stage.startswith("flow"):
+            image = decision_image(scene.frames[t], decisions["painted"][t], decisions["kept"][t])
+            logger.experiment.add_image(f"decisions/{stage}", image, step)

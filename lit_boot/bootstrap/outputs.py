@@ -4,7 +4,7 @@ the overlay video (see :mod:`lit_boot.bootstrap.runner` for the folder layout)."
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import torch
 
@@ -12,10 +12,9 @@ from ..data.atomic import atomic_write_bytes
 from ..flow import write_flows, write_flows_npz
 from .config import BootstrapConfig
 from .evaluate import pose_points
+from .decisions import decision_summary
 from .report import overlay_frames, plot_history, video_fps, write_video
-
-if TYPE_CHECKING:
-    from .runner import BootstrapResult
+from .result import BootstrapResult
 
 __all__ = ["write_outputs", "write_overlay_video", "speed_summary"]
 
@@ -56,6 +55,7 @@ def write_outputs(
         "format": "lit-boot-bootstrap", "version": 1, **settings, "device": device, "precision": precision,
         "stages": result.history, "before_after": {k: list(v) for k, v in result.before_after().items()},
         "speed": speed_summary(result), "drift_guard_events": guard_events,
+        "decisions": decision_summary(result.history),
     }  # fmt: skip
     atomic_write_bytes(out / "summary.json", (json.dumps(summary, indent=2, default=str) + "\n").encode())
     plot_history(result.history, out / "metrics.png")
@@ -73,12 +73,8 @@ def write_overlay_video(result: BootstrapResult, mode: str) -> None:
     nan = float("nan")
     before = torch.where(keep0[..., None], before, nan)
     after = torch.where(keep1[..., None], after, nan)
-    gt, gt_flow, valid = result.scene.gt, None, None
-    if gt is not None and gt.flow is not None:
-        gt_flow = gt.flow
-        valid = gt.flow_valid if gt.flow_valid is not None else torch.ones(gt.flow[:, 0].shape, dtype=torch.bool)
-        if gt.flow_occluded is not None:
-            valid = valid & ~gt.flow_occluded
+    gt = result.scene.gt
+    gt_flow, valid = (gt.flow, gt.flow_mask()) if gt is not None else (None, None)
     mosaic = overlay_frames(result.scene.frames, result.initial_flows, result.flows, before, after, layout,
-                            gt_flow=gt_flow, gt_valid=valid)  # fmt: skip
+                            gt_flow=gt_flow, gt_valid=valid, decisions=result.decisions)  # fmt: skip
     write_video(mosaic, result.run_dir / "overlay.mp4", fps=video_fps(len(mosaic), result.scene.fps))

@@ -15,6 +15,7 @@ from matplotlib import colormaps
 
 from ..core.joints import JointLayout, get_layout
 from ..data.visualize import draw_skeleton, flow_image
+from .decisions import decision_image
 
 __all__ = ["overlay_frames", "flow_colour_scale", "video_fps"]
 
@@ -83,15 +84,18 @@ def _label(image: np.ndarray, text: str) -> np.ndarray:
     return image
 
 
-def _legend(width: int, panel: int, flow_scale: float, error_scale: float | None) -> np.ndarray:
+def _legend(width: int, panel: int, flow_scale: float, error_scale: float | None, decisions: bool = False) -> np.ndarray:
     """The key under the mosaic, HWC uint8 (rows, ``width``): a flow colour wheel (flow_image of
     vectors up to ``flow_scale`` px) with the scale, the skeleton colours, and with GT the
-    error map's colour bar over [-error_scale, error_scale] px. ``panel``: the panel's shorter
+    error map's colour bar over [-error_scale, error_scale] px, and with ``decisions`` what the
+    decision panel's colours mean. ``panel``: the panel's shorter
     side, px, sets the text size; a key wider than ``width`` is scaled down to fit."""
     lines = [f"flow: hue = direction, white = still, full colour >= {flow_scale:.2g} px",
              "pose before (input)", "pose after (refined)"]  # fmt: skip
     if error_scale is not None:
         lines.append(f"+-{error_scale:.2g} px: EPE change vs GT, refined - RAFT (blue better, red worse, grey no GT)")
+    if decisions:
+        lines.append("decisions: orange = the target painted, blue = the tuned flow kept (grey: RAFT's flow kept)")
     font, text = cv2.FONT_HERSHEY_SIMPLEX, max(0.4, panel / 400)
     row = round(34 * text)
     wheel, mark = 3 * row - 4, 3 * row  # the wheel's diameter; line samples and colour bar
@@ -155,6 +159,7 @@ def overlay_frames(
     gt_flow: torch.Tensor | None = None,
     gt_valid: torch.Tensor | None = None,
     legend: bool = True,
+    decisions: dict[str, torch.Tensor] | None = None,
 ) -> torch.Tensor:
     """Before/after mosaics, one per frame pair: uint8 (T-1, 3, 2h + key, C w), C = 2 or 3.
 
@@ -169,7 +174,9 @@ def overlay_frames(
     :func:`flow_colour_scale` of all of them, longer vectors clipped to full colour; zero
     flow is white; the EPE change spans +-its 99th percentile |value|. Each panel has a text
     label; ``legend`` adds the key below (colour wheel and scale, skeleton colours, error
-    bar). Panels are h x w = H x W, scaled down (INTER_AREA; joints scaled with them) when
+    bar). ``decisions`` ({"painted": (T-1, H, W) bool, "kept": (T-1, H, W) float}, see
+    :mod:`~lit_boot.bootstrap.decisions`) replaces the top-left frame with the decision map
+    (:func:`~lit_boot.bootstrap.decisions.decision_image`). Panels are h x w = H x W, scaled down (INTER_AREA; joints scaled with them) when
     the mosaic's longer side would exceed ``max_side``. Raises ValueError naming the argument
     for a wrong shape.
     """
@@ -198,7 +205,7 @@ def overlay_frames(
         magnitudes.append(gt.norm(dim=1)[valid].numpy())
         epe, errors, error_scale = _epe_change(flows, gt, valid)
     flow_scale = flow_colour_scale(magnitudes)
-    key = _legend(cols * w, min(h, w), flow_scale, error_scale) if legend else None
+    key = _legend(cols * w, min(h, w), flow_scale, error_scale, decisions is not None) if legend else None
     mosaics = []
     for t in range(T - 1):
         frame = torch.from_numpy(np.ascontiguousarray(resize(frames[t].detach().cpu())))
@@ -208,7 +215,11 @@ def overlay_frames(
             pair = valid[t]
             labels = [f"{name} EPE {float(epe[k][t][pair].mean()) if pair.any() else math.nan:.2f}"
                       for name, k in zip(flow_labels, ("before", "after"))]  # fmt: skip
-        top = [_label(frame.numpy(), f"frame {t}"), _label(resize(before_img), labels[0])]
+        first = _label(frame.numpy(), f"frame {t}")
+        if decisions is not None:
+            image = decision_image(frames[t].detach().cpu(), decisions["painted"][t], decisions["kept"][t])
+            first = _label(resize(image), f"frame {t}: decisions")
+        top = [first, _label(resize(before_img), labels[0])]
         bottom = [_label(pose.permute(1, 2, 0).numpy(), "pose before/after"), _label(resize(after_img), labels[1])]
         if gt_flow is not None:
             gt_img = flow_image(gt[t], flow_scale).permute(1, 2, 0).numpy().copy()

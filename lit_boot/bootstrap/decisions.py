@@ -1,0 +1,90 @@
+"""What a run decided, and where: the pixels each flow stage's target painted (after the guards
+and the evidence gate), where its self-check kept the tuned flow, and the stages rolled back.
+
+- :func:`save_decisions` / :func:`load_decisions`: a flow stage's maps in
+  ``stages/<stage>/decisions.npz`` (``painted`` (T-1, H, W) uint8 0/1; ``kept`` (T-1, H, W)
+  uint8, the tuned flow's weight x 255: all 255 without a self-check).
+- :func:`decision_summary`: the per-stage counts for summary.json and the dashboard.
+- :func:`decision_image`: one pair's maps drawn over its frame (the overlay video, TensorBoard).
+- :func:`target_line`: what a flow stage's target painted, in one console line.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..data.atomic import atomic_write_bytes
+
+__all__ = ["save_decisions", "load_decisions", "decision_summary", "decision_image", "target_line",
+           "DECISION_COLOURS"]
+
+#: RGB of the painted target pixels and of the regions where the tuned flow was kept.
+DECISION_COLOURS = {"painted": (255, 140, 0), "kept": (40, 110, 255)}
+
+
+def save_decisions(path: str | os.PathLike, painted: torch.Tensor, kept: torch.Tensor) -> None:
+    """Write a flow stage's maps atomically: painted (T-1, H, W) bool, kept (T-1, H, W) float in
+    [0, 1] (the tuned flow's weight; all ones without a self-check)."""
+    kept_u8 = (kept.float().clamp(0, 1) * 255).round().byte().numpy()
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, painted=painted.bool().numpy().astype(np.uint8), kept=kept_u8)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+def load_decisions(path: str | os.PathLike) -> dict[str, torch.Tensor]:
+    """{"painted": (T-1, H, W) bool, "kept": (T-1, H, W) float in [0, 1]} from :func:`save_decisions`."""
+    with np.load(path) as data:
+        return {"painted": torch.from_numpy(data["painted"] > 0), "kept": torch.from_numpy(data["kept"]).float() / 255}
+
+
+def decision_summary(history: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One entry per flow stage of a run's records: ``painted_fraction`` (pixels its target
+    painted), ``gate_kept_fraction`` (of the sketch, after the evidence gate), ``bones_rejected``
+    (by the guards and the gate), ``kept_tuned_fraction`` and ``person_tuned_fraction`` (the
+    self-check; 1.0 without one), ``rolled_back`` and the guard that acted, if any."""
+    out = []
+    for record in history:
+        if record.get("kind") != "flow":
+            continue
+        info = record.get("info", {})
+        target, check = info.get("target", {}), info.get("self_check")
+        rejected = sum(v for k, v in target.items() if k.startswith("target/rejected_"))
+        out.append({
+            "stage": record["stage"],
+            "painted_fraction": target.get("target/painted_fraction"),
+            "gate_kept_fraction": target.get("target/gate_kept_fraction", 1.0),
+            "bones_rejected": rejected + target.get("target/gate_rejected_bones", 0.0),
+            "kept_tuned_fraction": check["kept_tuned_fraction"] if check else 1.0,
+            "person_tuned_fraction": check["person_tuned_fraction"] if check else 1.0,
+            "rolled_back": bool(record.get("rolled_back", False)),
+            "guard": record.get("guard", {}).get("guard"),
+        })  # fmt: skip
+    return out
+
+
+def decision_image(frame: torch.Tensor, painted: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
+    """Frame t (3, H, W) uint8 in grey, tinted blue by the tuned flow's weight ``kept`` (H, W)
+    in [0, 1], with the target's ``painted`` (H, W) bool pixels in orange on top: (3, H, W) uint8."""
+    grey = frame.float().mean(0, keepdim=True).expand(3, -1, -1) * 0.6 + 40
+    blue = torch.tensor(DECISION_COLOURS["kept"], dtype=torch.float32)[:, None, None]
+    orange = torch.tensor(DECISION_COLOURS["painted"], dtype=torch.float32)[:, None, None]
+    image = grey + 0.45 * kept.float()[None] * (blue - grey)
+    image = torch.where(painted[None], orange, image)
+    return image.round().clamp(0, 255).byte()
+
+
+def target_line(report: dict[str, float]) -> str:
+    """One line for the console from FlowTTT's target report: the share of pixels painted, the
+    bones the guards rejected and, with the evidence gate, the share of the sketch it kept."""
+    guards = int(sum(v for k, v in report.items() if k.startswith("target/rejected_")))
+    line = f"  target: painted {100 * report.get('target/painted_fraction', 0.0):.1f}% of the pixels"
+    line += f"; the guards rejected {guards} bone(s)"
+    if "target/gate_kept_fraction" in report:
+        line += (f"; the evidence gate kept {100 * report['target/gate_kept_fraction']:.0f}% of the sketch "
+                 f"({int(report.get('target/gate_rejected_bones', 0))} more bone(s) rejected)")
+    return line
