@@ -38,14 +38,14 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                     "train_updates": 20, "freeze_batchnorm": False, "lr": 1e-5},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
-        "options": {"scale_footprint": False, "cuda_precision": "16-mixed"},
+        "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off"},
     },
     "default": {
         "flow_3d": {"sketch": {"footprint": "cross", "size": 15}, "loss": "final", "train_updates": 20, "lr": 1e-5},
         "flow_2d": {"sketch": {"footprint": "cross", "size": 15}, "loss": "final", "train_updates": 20, "lr": 1e-5},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
-        "options": {"scale_footprint": True, "cuda_precision": "16-mixed"},
+        "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric"},
     },
 }  # fmt: skip
 
@@ -96,22 +96,28 @@ class BootstrapConfig:
         pose_accelerator: for the pose stages (a few thousand numbers: the CPU is faster).
         precision: Lightning precision of the flow stages; None: the preset's on CUDA
             (mixed), 32-true on CPU.
-        drift_guard: after each stage the flow-pose agreement is compared with before it:
-            record (only record it), stop (stop the run when it worsens by more than
-            drift_tolerance px) or rollback (undo that stage and stop).
-        drift_tolerance: how much worse (px) the flow-pose agreement may get before the drift
-            guard acts.
+        drift_guard: after each stage its image evidence (no ground truth; see
+            :mod:`lit_boot.bootstrap.guard`) is compared with the last stage's: a flow stage's
+            census error of the frames warped by its flow, a pose stage's census error along
+            the joint tracks. record (only record them), stop (stop the run when the stage made
+            it worse by more than drift_tolerance) or rollback (undo that stage and stop).
+        drift_tolerance: how much worse, as a fraction (0.01: 1%), a stage's evidence may get
+            before the drift guard acts.
         flow_format: flo (one Middlebury file per pair) or npz for the run's final flows.
         video: write overlay.mp4.
         progress_bar: Lightning's progress bars.
-        self_check: after each flow stage, without ground truth: off, or photometric (per pair,
-            in the person region and in background tiles, keep the tuned flow only where its
-            census error is clearly lower than the initial flow's; see
+        self_check: after each flow stage, without ground truth: None (the preset's: photometric
+            in default, off in paper), off, or photometric (per pair,
+            keep the tuned flow only where its census error is clearly lower than the initial
+            flow's: on the person pixel by pixel, over a small window, elsewhere per tile; see
             :mod:`lit_boot.bootstrap.selfcheck`). The stage's flows are then the checked flows.
         self_check_margin: how much lower (a fraction of the initial flow's error) the tuned
             flow's error must be to be kept; ties keep the initial flow.
         self_check_tile: background tile size, px.
-        self_check_blend: px over which the two flows are blended at region borders.
+        self_check_window: the box (px) over which each person pixel's errors are averaged.
+        self_check_z: how many standard errors a background tile's gain must clear (noisy
+            evidence, as on blurred frames, keeps the initial flow).
+        self_check_blend: px over which the two flows are blended where the choice changes.
         seed: seed_everything before each stage (the same run gives the same result).
     """
 
@@ -134,15 +140,17 @@ class BootstrapConfig:
     flow_format: str = "flo"
     video: bool = True
     progress_bar: bool = True
-    self_check: str = "off"
+    self_check: str | None = None
     self_check_margin: float = 0.02
     self_check_tile: int = 32
-    self_check_blend: int = 4
+    self_check_window: int = 5
+    self_check_z: float = 1.0
+    self_check_blend: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
         checks = [("mode", MODES), ("preset", tuple(PRESETS)), ("drift_guard", DRIFT_GUARDS),
-                  ("flow_format", ("flo", "npz")), ("self_check", SELF_CHECKS)]
+                  ("flow_format", ("flo", "npz")), ("self_check", (None, *SELF_CHECKS))]
         for name, allowed in checks:
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name}: expected one of {allowed}, got {getattr(self, name)!r}")
@@ -152,13 +160,15 @@ class BootstrapConfig:
             raise ValueError(f"flow_epochs: expected >= 1 or None, got {self.flow_epochs}")
         if self.pose_steps < 1:
             raise ValueError(f"pose_steps: expected >= 1, got {self.pose_steps}")
+        if self.self_check_z < 0:
+            raise ValueError(f"self_check_z: expected >= 0 standard errors, got {self.self_check_z}")
         if not 0 <= self.self_check_margin < 1:
             raise ValueError(f"self_check_margin: expected 0 <= margin < 1, got {self.self_check_margin}")
-        if self.self_check_tile < 1 or self.self_check_blend < 0:
-            raise ValueError(f"self_check_tile / self_check_blend: expected >= 1 / >= 0 px, got "
-                             f"{self.self_check_tile} / {self.self_check_blend}")
+        if self.self_check_tile < 1 or self.self_check_window < 1 or self.self_check_blend < 0:
+            raise ValueError(f"self_check_tile / self_check_window / self_check_blend: expected >= 1 / >= 1 / >= 0 "
+                             f"px, got {self.self_check_tile} / {self.self_check_window} / {self.self_check_blend}")
         if self.drift_tolerance < 0:
-            raise ValueError(f"drift_tolerance: expected >= 0 px, got {self.drift_tolerance}")
+            raise ValueError(f"drift_tolerance: expected a fraction >= 0, got {self.drift_tolerance}")
 
     @property
     def epochs(self) -> int:
@@ -174,6 +184,11 @@ class BootstrapConfig:
 
     def option(self, name: str) -> Any:
         return PRESETS[self.preset]["options"][name]
+
+    @property
+    def checking(self) -> str:
+        """The self-check the flow stages use: ``self_check``, or the preset's when None."""
+        return self.self_check if self.self_check is not None else self.option("self_check")
 
     def flow_kwargs(self, member: int = 0, person_px: float | None = None) -> dict[str, Any]:
         """FlowTTT arguments for ensemble member ``member`` (0: ``flow``), the preset's

@@ -50,45 +50,18 @@ from ..flow import FlowTTT, write_flows_npz
 from ..pose import PoseResult, load_pose_result
 from .config import BootstrapConfig
 from .dashboard import log_stage_images, stage_header
+from .decisions import decision_summary, load_decisions, save_decisions, target_line
 from .ensemble import average_poses
-from .evaluate import agreement, drift, flow_metrics, pose_metrics, pose_points
+from .evaluate import agreement, drift, flow_metrics, photo_error, pose_metrics, pose_points, pose_track_error
 from .folder import STAGE_JSON, RunFolder
+from .guard import drift_guard, guard_text
 from .lock import RunLock
 from .outputs import write_outputs
+from .result import BootstrapResult
 from .selfcheck import check_stage, summary_line
 from .stages import fine_tune_flow, make_flow_model, make_refiner, predict_flows, refine_poses_stage
 
 __all__ = ["Bootstrap", "BootstrapResult", "bootstrap", "STAGE_JSON"]
-
-
-@dataclass
-class BootstrapResult:
-    """What a run gives: the refined scene (its estimates replaced by the refined poses), the
-    initial and final flows (T-1, 2, H, W) px, the final PoseResult (None without a pose
-    stage), one metrics record per stage (see :mod:`lit_boot.bootstrap.evaluate`), the run
-    folder, seconds per stage, and the scene as the run started (initial estimates)."""
-
-    run_dir: Path
-    scene: Scene
-    initial_scene: Scene
-    initial_flows: torch.Tensor
-    flows: torch.Tensor
-    poses: PoseResult | None
-    history: list[dict[str, Any]] = field(default_factory=list)
-    seconds: dict[str, float] = field(default_factory=dict)
-
-    def before_after(self) -> dict[str, tuple[float, float]]:
-        """Each metric's value at the start and at its last stage (see report.before_after)."""
-        from .report import before_after
-
-        return before_after(self.history)
-
-    def table(self) -> str:
-        """A before/after table (markdown) of every metric with units, changes marked better /
-        worse, and a legend (see report.metrics_table)."""
-        from .report import metrics_table
-
-        return metrics_table(self.history)
 
 
 def _save_tensor(path: Path, state: dict[str, torch.Tensor]) -> None:
@@ -119,6 +92,7 @@ class _RunState:
     result: PoseResult | None = None
     history: list[dict[str, Any]] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
+    decisions: dict[str, torch.Tensor] | None = None
 
 
 class Bootstrap:
@@ -214,10 +188,11 @@ class Bootstrap:
         return self.models[member]
 
     # --- the stages --------------------------------------------------------------------------------
-    def _flow_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], torch.Tensor]:
-        """Fine-tune every ensemble member on the stick-man of the current poses; the record
-        and the members' mean flow (T-1, 2, H, W) px, self-checked against the initial flow when
-        the config says so (:mod:`~lit_boot.bootstrap.selfcheck`)."""
+    def _flow_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], torch.Tensor, dict]:
+        """Fine-tune every ensemble member on the stick-man of the current poses; the record,
+        the members' mean flow (T-1, 2, H, W) px, self-checked against the initial flow when
+        the config says so (:mod:`~lit_boot.bootstrap.selfcheck`), and the decision maps
+        (:mod:`~lit_boot.bootstrap.decisions`)."""
         cfg, n = self.config, len(self.models)
         what = f"FlowTTT x{n}, {cfg.epochs} epochs, {st.precision} on {st.accelerator}"
         print(stage_header(index, len(cfg.stages()), name, what), flush=True)
@@ -230,14 +205,17 @@ class Bootstrap:
             flows.append(predict_flows(model, st.scene, st.accelerator, st.precision))
         mean = torch.stack(flows).mean(0)
         person = self.models[0].person_region(self.models[0].sketch_masks)
-        mean, check = check_stage(cfg, st.scene, st.initial, mean, person)
+        mean, check, kept = check_stage(cfg, st.scene, st.initial, mean, person)
         record = {**flow_metrics(st.scene, mean), "drift_px": drift(mean, st.initial, person),
                   "agreement_px": agreement(mean, *pose_points(st.scene, cfg.mode)),
+                  "photo_error": photo_error(st.scene.frames, mean),
                   "info": {"target": reports[0], "sketch": self.models[0].hparams["sketch"]}}  # fmt: skip
+        print(target_line(reports[0]), flush=True)
         if check is not None:
             record["info"]["self_check"] = check
             print(summary_line(check), flush=True)
-        return record, mean
+        kept = kept if kept is not None else torch.ones(mean.shape[0], *mean.shape[-2:])
+        return record, mean, {"painted": self.models[0].sketch_masks.cpu(), "kept": kept}
 
     def _pose_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], PoseResult]:
         """Refine the current poses against the current flows; the record and the result."""
@@ -250,6 +228,7 @@ class Bootstrap:
         refined = result.apply_to(st.scene)
         record = {**pose_metrics(refined, cfg.mode),
                   "agreement_px": agreement(st.flows, *pose_points(refined, cfg.mode)),
+                  "track_error": pose_track_error(refined.frames, *pose_points(refined, cfg.mode)),
                   "info": {"steps": result.steps, "stopped_early": result.stopped_early,
                            "loss": result.loss}}  # fmt: skip
         return record, result
@@ -275,6 +254,8 @@ class Bootstrap:
             record = {"stage": "initial", "kind": "initial", "cycle": 0, **flow_metrics(st.scene, st.initial),
                       **pose_metrics(st.scene, cfg.mode),
                       "agreement_px": agreement(st.initial, *pose_points(st.scene, cfg.mode)),
+                      "photo_error": photo_error(st.scene.frames, st.initial),
+                      "track_error": pose_track_error(st.scene.frames, *pose_points(st.scene, cfg.mode)),
                       "info": {"seconds": time.perf_counter() - start, "person_px": st.person_px}}  # fmt: skip
             folder.mkdir(parents=True, exist_ok=True)
             write_flows_npz(folder / "flows.npz", st.initial)
@@ -292,12 +273,13 @@ class Bootstrap:
         folder = self.folder.stage_dir(name)
         if record["kind"] == "flow":
             st.flows = _load_flows(folder / "flows.npz")
+            st.decisions = load_decisions(folder / "decisions.npz") if (folder / "decisions.npz").is_file() else None
             self.pending_weights = [folder / f"raft_{m}.pt" for m in range(len(self.models))]
         else:
             st.result = load_pose_result(folder)
             st.scene = st.result.apply_to(st.scene)
         st.seconds[name] = record["info"]["seconds"]
-        log_stage_images(st.loggers, index, name, st.scene, st.flows, self.config.mode)
+        log_stage_images(st.loggers, index, name, st.scene, st.flows, self.config.mode, st.decisions)
         return "guard" not in record  # the drift guard stopped the run here
 
     def _run_stage(self, st: _RunState, index: int, name: str) -> bool:
@@ -309,45 +291,34 @@ class Bootstrap:
         start = time.perf_counter()
         try:
             if kind == "flow":
-                record, flows = self._flow_stage(name, index, st)
+                record, flows, decisions = self._flow_stage(name, index, st)
                 scene, result = st.scene, st.result
             else:
                 record, result = self._pose_stage(name, index, st)
-                scene, flows = result.apply_to(st.scene), st.flows
+                scene, flows, decisions = result.apply_to(st.scene), st.flows, st.decisions
         except NonFiniteError as err:
             return self._roll_back(st, head, start, err)
         record = {**head, **record}
         record["info"]["seconds"] = time.perf_counter() - start
-        guard = self._drift_guard(record, st.history[-1]["agreement_px"])
+        guard = drift_guard(self.config, record, st.history)
         if guard is not None:
             record["guard"] = guard
             if guard["action"] == "rollback":
                 record["rolled_back"] = True
                 self.folder.write_record(name, record)
                 st.history.append(record)
-                before, after = guard["agreement_before"], guard["agreement_after"]
-                print(f"  drift guard: flow-pose agreement {before:.3f} -> {after:.3f} px; "
-                      f"{name} rolled back, run stopped", flush=True)  # fmt: skip
+                print(f"  drift guard: {guard_text(guard)}; {name} rolled back, run stopped", flush=True)
                 return False
-        self._save_stage(name, kind, flows, result)
+        self._save_stage(name, kind, flows, result, decisions)
         self.folder.write_record(name, record)
-        st.flows, st.scene, st.result = flows, scene, result
+        st.flows, st.scene, st.result, st.decisions = flows, scene, result, decisions
         st.history.append(record)
         st.seconds[name] = record["info"]["seconds"]
-        log_stage_images(st.loggers, index, name, st.scene, st.flows, cfg.mode)
+        log_stage_images(st.loggers, index, name, st.scene, st.flows, cfg.mode, st.decisions)
         if guard is not None:
-            worse = guard["agreement_after"] - guard["agreement_before"]
-            print(f"  drift guard: flow-pose agreement worsened by {worse:.3f} px; run stopped", flush=True)
+            print(f"  drift guard: {guard_text(guard)}; run stopped", flush=True)
             return False
         return True
-
-    def _drift_guard(self, record: dict[str, Any], before: float) -> dict[str, Any] | None:
-        """The drift guard's event when the stage worsened the agreement beyond the tolerance."""
-        cfg = self.config
-        if cfg.drift_guard == "record" or not record["agreement_px"] - before > cfg.drift_tolerance:
-            return None
-        return {"guard": "drift", "agreement_before": before, "agreement_after": record["agreement_px"],
-                "action": cfg.drift_guard}  # fmt: skip
 
     def _roll_back(self, st: _RunState, head: dict[str, Any], start: float, err: NonFiniteError) -> bool:
         """Record a stage stopped by a non-finite value as rolled back (its output discarded,
@@ -359,12 +330,13 @@ class Bootstrap:
         print(f"  finite guard: {err}; {head['stage']} rolled back (its output discarded), run stopped", flush=True)
         return False
 
-    def _save_stage(self, name: str, kind: str, flows: torch.Tensor, result: PoseResult | None) -> None:
-        """A finished stage's results (each file atomic): flows and weights, or the poses."""
+    def _save_stage(self, name: str, kind: str, flows: torch.Tensor, result: PoseResult | None, decisions) -> None:
+        """A finished stage's results (each file atomic): flows, weights and decision maps, or the poses."""
         folder = self.folder.stage_dir(name)
         folder.mkdir(parents=True, exist_ok=True)
         if kind == "flow":
             write_flows_npz(folder / "flows.npz", flows)
+            save_decisions(folder / "decisions.npz", decisions["painted"], decisions["kept"])
             for m, model in enumerate(self.models):
                 _save_tensor(folder / f"raft_{m}.pt", model.raft.state_dict())
         else:
@@ -398,13 +370,15 @@ class Bootstrap:
         """Log the per-stage metrics to the summary loggers; write the run's outputs."""
         for i, record in enumerate(st.history):
             metrics = {f"bootstrap/{k}": v for k, v in record.items() if isinstance(v, float) and k != "cycle"}
+            for entry in decision_summary([record]):  # flow stages: what was painted, kept, rolled back
+                metrics.update({f"decisions/{k}": float(v) for k, v in entry.items() if isinstance(v, (int, float))})
             for logger in st.loggers:
                 logger.log_metrics(metrics, step=i)
         for logger in st.loggers:
             logger.save()
         guard_events = [{"stage": r["stage"], **r["guard"]} for r in st.history if "guard" in r]
         out = BootstrapResult(self.out, st.scene, st.initial_scene, st.initial, st.flows, st.result, st.history,
-                              st.seconds)
+                              st.seconds, st.decisions)
         write_outputs(out, self._settings(), guard_events, st.accelerator, st.precision, self.config)
         return out
 
