@@ -8,7 +8,16 @@ of the run / plain RAFT inference on the same frames, seconds per frame).
 Usage:
   python benchmarks/bootstrap_suite.py [--presets default,paper] [--scenes 0,1,...]
       [--frames 12] [--height 128] [--width 256] [--weights ../shared/checkpoints/raft-small.pth]
-      [--epochs 8] [--out /tmp/bootstrap_suite] [--json out.json]
+      [--epochs 8] [--mode 3d|2d] [--self-check off|photometric (default: the preset's)] [--gate] [--detector realistic|accurate]
+      [--out /tmp/bootstrap_suite] [--json out.json]
+
+``--mode 2d`` runs the 2D-only method on the DCPose-like keypoints (pose metric: kp2d_px);
+``--self-check photometric`` turns the flow stages' self-check on; ``--gate`` makes the targets
+with the evidence gate (:data:`GATE`); ``--detector accurate`` simulates the cleaner 2D
+detector (lit_boot.synth.config.ACCURATE_DETECTOR) instead of the default measured from
+MediaPipe on real clips (benchmarks/detector_noise.py). The last lines give, per preset, the issue-13 bars: the
+mean over scenes of each EPE's relative change (RAFT -> the last flow stage), the worst scene's,
+and whether the all-pixel EPE is better on every scene.
 
 Conventions as in benchmarks/flow_ttt_suite.py (EPE pooled over valid non-occluded pixels of all
 pairs; joints: GT joint displacement vs the flow at the rounded pixel) and
@@ -24,7 +33,8 @@ from pathlib import Path
 
 from lit_boot.bootstrap import bootstrap
 from lit_boot.bootstrap.outputs import speed_summary
-from lit_boot.synth import make_scene
+from lit_boot.synth import EstimateConfig, make_scene
+from lit_boot.synth.config import ACCURATE_DETECTOR
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 MOCAP = SHARED / "data/mocap/cmu_131"
@@ -39,6 +49,8 @@ SCENES = [
     ("run_pan_s7", dict(motion="run", seed=7, pan_deg_per_s=10.0, noise_std=2.0)),
 ]
 FLOW_KEYS = ("epe", "epe_person", "epe_background", "epe_joints")
+#: The evidence gate of ``--gate``: bone+pixel with a 3 px search (benchmarks/gate_check.py's best).
+GATE = {"gate": "photometric", "gate_level": "bone+pixel", "gate_search": 3}
 POSE_KEYS = ("mpjpe_mm", "pa_mpjpe_mm", "accel_mm_per_frame2")
 
 
@@ -50,7 +62,11 @@ def main() -> None:
     p.add_argument("--height", type=int, default=128)
     p.add_argument("--width", type=int, default=256)
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))
-    p.add_argument("--epochs", type=int, default=8)
+    p.add_argument("--epochs", type=int, default=None, help="per flow stage (default: 8 in 3D mode, 50 in 2D)")
+    p.add_argument("--mode", default="3d", choices=("3d", "2d"))
+    p.add_argument("--self-check", default=None, choices=("off", "photometric"), help="default: the preset's")
+    p.add_argument("--gate", action="store_true", help="targets with the evidence gate (GATE)")
+    p.add_argument("--detector", default="realistic", choices=("realistic", "accurate"))
     p.add_argument("--out", default="/tmp/bootstrap_suite")
     p.add_argument("--json", default=None)
     args = p.parse_args()
@@ -58,43 +74,53 @@ def main() -> None:
     rows = []
     for i in [int(s) for s in args.scenes.split(",")]:
         name, spec = SCENES[i]
-        scene = make_scene(frames=args.frames, height=args.height, width=args.width, **spec)
+        estimates = EstimateConfig(**(ACCURATE_DETECTOR if args.detector == "accurate" else {}))
+        scene = make_scene(frames=args.frames, height=args.height, width=args.width, estimates=estimates, **spec)
         for preset in args.presets.split(","):
             out = Path(args.out) / f"{name}_{preset}"
             shutil.rmtree(out, ignore_errors=True)
-            result = bootstrap(scene, out, preset=preset, flow={"weights": args.weights}, flow_epochs=args.epochs,
-                               progress_bar=False, video=False)  # fmt: skip
+            flow = {"weights": args.weights, **({"sketch": GATE} if args.gate else {})}
+            result = bootstrap(scene, out, preset=preset, mode=args.mode, flow=flow, flow_epochs=args.epochs,
+                               self_check=args.self_check, progress_bar=False, video=False)  # fmt: skip
             by_stage = {r["stage"]: r for r in result.history}
             row = {"scene": name, "preset": preset, "speed": speed_summary(result),
                    "stages": {k: {m: v for m, v in r.items() if isinstance(v, float)} for k, r in by_stage.items()}}  # fmt: skip
             rows.append(row)
             print(json.dumps(row), flush=True)
-    print("\n| scene | preset | EPE all RAFT -> c1 -> c2 | person | background | joints | MPJPE init -> refined "
-          "| PA-MPJPE | Accel | agreement px init -> end | x RAFT | s/frame |")  # fmt: skip
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print_table(rows, args.mode)
+    for preset in args.presets.split(","):
+        print_bars([r for r in rows if r["preset"] == preset], preset)
+    if args.json:
+        Path(args.json).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
+
+
+def print_table(rows: list[dict], mode: str) -> None:
+    """The per-scene markdown table: EPEs per flow stage, the pose metrics, agreement, speed."""
+    pose_keys = POSE_KEYS if mode == "3d" else ("kp2d_px",)
+    print(f"\n| scene | preset | EPE all RAFT -> c1 -> c2 | person | background | joints | "
+          f"{' | '.join(k + ' init -> refined' for k in pose_keys)} | agreement px init -> end | x RAFT | s/frame |")
+    print("| --- " * (9 + len(pose_keys)) + "|")
     for r in rows:
         s = r["stages"]
         flow = [" -> ".join(f"{s[st].get(k, float('nan')):.3f}" for st in ("initial", "flow_1", "flow_2")) for k in FLOW_KEYS]
-        pose = [f"{s['initial'].get(k, float('nan')):.1f} -> {s['pose_1'].get(k, float('nan')):.1f}" for k in POSE_KEYS]
+        pose = [f"{s['initial'].get(k, float('nan')):.1f} -> {s['pose_1'].get(k, float('nan')):.1f}" for k in pose_keys]
         agree = f"{s['initial']['agreement_px']:.2f} -> {s['flow_2']['agreement_px']:.2f}"
         sp = r["speed"]
         print(f"| {r['scene']} | {r['preset']} | {' | '.join(flow)} | {' | '.join(pose)} | {agree} "
               f"| {sp['ratio_to_raft']:.1f} | {sp['s_per_frame']:.1f} |")  # fmt: skip
-    for preset in args.presets.split(","):
-        sel = [r["stages"] for r in rows if r["preset"] == preset]
-        if not sel:
-            continue
-        mean = lambda st, k: sum(x[st][k] for x in sel) / len(sel)  # noqa: E731
-        change = lambda a, b: 100 * (b - a) / a  # noqa: E731
-        print(f"\n{preset}: mean over {len(sel)} scenes: person EPE {mean('initial', 'epe_person'):.3f} -> "
-              f"{mean('flow_2', 'epe_person'):.3f} ({change(mean('initial', 'epe_person'), mean('flow_2', 'epe_person')):+.1f}%), "
-              f"background {mean('initial', 'epe_background'):.3f} -> {mean('flow_2', 'epe_background'):.3f} "
-              f"({change(mean('initial', 'epe_background'), mean('flow_2', 'epe_background')):+.1f}%), "
-              f"all {mean('initial', 'epe'):.3f} -> {mean('flow_2', 'epe'):.3f}, "
-              f"MPJPE {mean('initial', 'mpjpe_mm'):.1f} -> {mean('pose_1', 'mpjpe_mm'):.1f} "
-              f"({change(mean('initial', 'mpjpe_mm'), mean('pose_1', 'mpjpe_mm')):+.1f}%)")  # fmt: skip
-    if args.json:
-        Path(args.json).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
+
+
+def print_bars(rows: list[dict], preset: str) -> None:
+    """Mean and worst relative change (%) of EPE all / person / background, RAFT -> flow_2, and
+    whether every scene's all-pixel EPE got better (issue 13's bars)."""
+    if not rows:
+        return
+    rel = {k: [100 * (r["stages"]["flow_2"][k] / r["stages"]["initial"][k] - 1) for r in rows]
+           for k in ("epe", "epe_person", "epe_background")}  # fmt: skip
+    parts = [f"{k} {sum(v) / len(v):+.1f}% (worst {max(v):+.1f}%)" for k, v in rel.items()]
+    better = sum(v < 0 for v in rel["epe"])
+    print(f"\n{preset}: mean over {len(rows)} scenes of the change RAFT -> flow_2: {', '.join(parts)}; "
+          f"all-pixel EPE better on {better} of {len(rows)} scenes")
 
 
 if __name__ == "__main__":

@@ -5,15 +5,21 @@
   before (pretrained RAFT) and after. "all" = every valid pixel, occluded ones included (Sintel's
   convention); "noc" = valid and not occluded (lit-boot's run metrics). keypoints_gt_pair.png in
   each run folder shows MediaPipe's keypoints on the GT pair's first frame.
-- The basketball clip (no GT): the whole 3D method on its first frames; the flow-pose agreement
-  (L_opt residual, px) before and after, and the overlay video in the run folder.
+- The basketball clip (no GT): the whole 3D method on its first frames; the football clip (no GT,
+  10 frames): the 2D-only method. For both, the flow-pose agreement (L_opt residual, px) before and
+  after, the overlay video in the run folder, and the image evidence (no GT needed): the census
+  error (0..48) of the frames warped by RAFT's and by the final flow, on the person (the last flow
+  stage's target dilated by 16 px) and on all pixels, with what the target painted and the
+  self-check kept (issue 13).
 
 Usage:
-  python benchmarks/real_data.py [--parts sintel,basketball] [--scenes alley_1,market_5,temple_3]
+  python benchmarks/real_data.py [--parts sintel,basketball,football] [--scenes alley_1,market_5,...]
       [--sintel-size 218,512] [--flow '{"sketch": {"max_disagreement_px": 3}}']
       [--epochs N (default: the mode's)] [--pose-steps 1500] [--basketball-frames 16]
       [--basketball-resize 270] [--weights ../shared/checkpoints/raft-small.pth]
-      [--out /tmp/real_data] [--json out.json]
+      [--self-check off|photometric] [--gate] [--out /tmp/real_data] [--json out.json]
+The Sintel windows are every sample in ../shared (SINTEL); market_5's two windows are market_5
+and market_5b.
 """
 
 from __future__ import annotations
@@ -33,7 +39,9 @@ from lit_boot.estimate import estimate_poses
 from lit_boot.metrics import flow_errors
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
-SINTEL = [("alley_1", 1, 4), ("market_5", 1, 4), ("temple_3", 21, 24)]
+SINTEL = [("alley_1", 1, 4), ("market_5", 1, 4), ("market_5b", 8, 11), ("temple_3", 21, 24), ("bandage_1", 34, 37),
+          ("ambush_4", 3, 8)]  # fmt: skip
+GATE = {"gate": "photometric", "gate_level": "bone+pixel", "gate_search": 3}
 
 
 def gt_pair_epe(flows: torch.Tensor, scene) -> dict[str, float]:
@@ -46,15 +54,40 @@ def gt_pair_epe(flows: torch.Tensor, scene) -> dict[str, float]:
 
 def run(scene, out: Path, mode: str, args, video: bool) -> tuple[dict, object]:
     shutil.rmtree(out, ignore_errors=True)
-    flow = {"weights": args.weights, **json.loads(args.flow)}
-    result = bootstrap(scene, out, mode=mode, flow=flow, flow_epochs=args.epochs,
+    flow = {"weights": args.weights, **({"sketch": GATE} if args.gate else {}), **json.loads(args.flow)}
+    result = bootstrap(scene, out, mode=mode, flow=flow, flow_epochs=args.epochs, self_check=args.self_check,
                        pose_steps=args.pose_steps, progress_bar=False, video=video)  # fmt: skip
     return speed_summary(result), result
 
 
+def evidence(result) -> dict:
+    """Census error (0..48) of RAFT's and the final flow, on the person and on all pixels, and
+    what each flow stage decided (lit_boot.bootstrap.decisions)."""
+    import kornia
+
+    from lit_boot.bootstrap.decisions import decision_summary
+    from lit_boot.flow.evidence import photometric_error
+
+    frames = result.scene.frames
+    painted = result.decisions["painted"] if result.decisions is not None else torch.zeros(frames.shape[0] - 1, 1, 1)
+    person = kornia.morphology.dilation(painted[:, None].float(), torch.ones(33, 33))[:, 0] > 0
+    out = {}
+    for name, flows in (("raft", result.initial_flows), ("final", result.flows)):
+        sums = torch.zeros(4)
+        for t in range(flows.shape[0]):
+            err, ok = photometric_error(frames[t : t + 1], frames[t + 1 : t + 2], flows[t : t + 1].float())
+            sel = ok[0] & person[t].expand_as(ok[0])
+            sums += torch.tensor([float(err[0][sel].sum()), float(sel.sum()), float(err[ok].sum()), float(ok.sum())])
+        out[name] = {"person": float(sums[0] / sums[1]) if sums[1] else float("nan"), "all": float(sums[2] / sums[3])}
+    out["decisions"] = decision_summary(result.history)
+    return out
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--parts", default="sintel,basketball")
+    p.add_argument("--parts", default="sintel,basketball,football")
+    p.add_argument("--self-check", default=None, choices=("off", "photometric"), help="default: the preset's")
+    p.add_argument("--gate", action="store_true", help="targets with the evidence gate (GATE)")
     p.add_argument("--scenes", default=",".join(name for name, _, _ in SINTEL), help="Sintel samples to run")
     p.add_argument("--flow", default="{}", help='FlowTTT options over the preset\'s, JSON: {"sketch": {"max_disagreement_px": 3}}')
     p.add_argument("--sintel-size", default="218,512", help="H,W (the samples are 436,1024)")
@@ -70,38 +103,45 @@ def main() -> None:
     rows = []
     if "sintel" in args.parts:
         size = tuple(int(v) for v in args.sintel_size.split(","))
-        for name, first, last in (s for s in SINTEL if s[0] in args.scenes.split(",")):
-            root = SHARED / "data/sintel_samples"
+        for window, first, last in (s for s in SINTEL if s[0] in args.scenes.split(",")):
+            name, root = window.rstrip("b"), SHARED / "data/sintel_samples"
             # MediaPipe on the full-size frames (it misses small people), poses rescaled to `size`
             poses = estimate_poses(read_sintel(root, name, first=first, last=last))
             scene = poses.apply_to(read_sintel(root, name, first=first, last=last, size=size))
-            speed, result = run(scene, Path(args.out) / name, "2d", args, video=False)
+            speed, result = run(scene, Path(args.out) / window, "2d", args, video=False)
             # the detections on the GT pair's first frame, to judge them by eye (frame | GT flow | keypoints)
             first_gt = scene.metadata["frames"].index(scene.metadata["gt_pairs"][0][0])
-            write_png(Path(args.out) / name / "keypoints_gt_pair.png", scene_preview(scene, first_gt))
-            row = {"scene": name, "found": int(poses.found().sum()), "frames": scene.num_frames,
+            write_png(Path(args.out) / window / "keypoints_gt_pair.png", scene_preview(scene, first_gt))
+            row = {"scene": window, "found": int(poses.found().sum()), "frames": scene.num_frames,
                    "before": gt_pair_epe(result.initial_flows, scene), "after": gt_pair_epe(result.flows, scene),
-                   "agreement": [result.history[0]["agreement_px"], result.history[-1]["agreement_px"]], "speed": speed}  # fmt: skip
+                   "agreement": [result.history[0]["agreement_px"], result.history[-1]["agreement_px"]], "speed": speed,
+                   "evidence": evidence(result)}  # fmt: skip
             rows.append(row)
             print(json.dumps(row), flush=True)
-    if "basketball" in args.parts:
-        path = SHARED / "data/videos/basketball_1080p_89f.mp4"
-        scene = read_video(path, max_frames=args.basketball_frames, resize=args.basketball_resize)
+    clips = {"basketball": ("basketball_1080p_89f.mp4", "3d", args.basketball_frames, args.basketball_resize),
+             "football": ("football_720p_10f", "2d", None, args.basketball_resize)}  # fmt: skip
+    for clip, (file, mode, frames, resize) in clips.items():
+        if clip not in args.parts:
+            continue
+        scene = read_video(SHARED / "data/videos" / file, max_frames=frames, resize=resize)
         poses = estimate_poses(scene)
         scene = poses.apply_to(scene)
-        speed, result = run(scene, Path(args.out) / "basketball", "3d", args, video=True)
-        row = {"scene": "basketball", "found": int(poses.found().sum()), "frames": scene.num_frames,
+        speed, result = run(scene, Path(args.out) / clip, mode, args, video=True)
+        row = {"scene": clip, "mode": mode, "found": int(poses.found().sum()), "frames": scene.num_frames,
                "agreement": [result.history[0]["agreement_px"], result.history[-1]["agreement_px"]],
-               "overlay": str(result.run_dir / "overlay.mp4"), "speed": speed}  # fmt: skip
+               "overlay": str(result.run_dir / "overlay.mp4"), "speed": speed, "evidence": evidence(result)}  # fmt: skip
         rows.append(row)
         print(json.dumps(row), flush=True)
-    print("\n| scene | frames (person found) | EPE all before -> after | EPE noc before -> after | agreement px | x RAFT |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    print("\n| scene | frames (person found) | EPE all before -> after | EPE noc before -> after | agreement px "
+          "| census person RAFT -> final | census all RAFT -> final | painted, kept tuned per flow stage | x RAFT |")
+    print("| --- " * 9 + "|")
     for r in rows:
         epe = [f"{r['before'][k]:.3f} -> {r['after'][k]:.3f}" if "before" in r else "no GT" for k in ("all", "noc")]
-        a = r["agreement"]
+        a, ev = r["agreement"], r["evidence"]
+        census = [f"{ev['raft'][k]:.2f} -> {ev['final'][k]:.2f}" for k in ("person", "all")]
+        decided = "; ".join(f"{d['painted_fraction'] or 0:.3f}, {d['kept_tuned_fraction']:.2f}" for d in ev["decisions"])
         print(f"| {r['scene']} | {r['frames']} ({r['found']}) | {epe[0]} | {epe[1]} | {a[0]:.2f} -> {a[1]:.2f} "
-              f"| {r['speed']['ratio_to_raft']:.1f} |")  # fmt: skip
+              f"| {census[0]} | {census[1]} | {decided} | {r['speed']['ratio_to_raft']:.1f} |")  # fmt: skip
     if args.json:
         Path(args.json).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
 
