@@ -18,7 +18,7 @@ tuned and checked flows, pooled over pixels per scene; then the mean relative ch
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/selfcheck_check.py [--scenes 0,1,2,3,4,5,6,7] [--frames 8]
       [--height 128] [--width 256] [--epochs 8] [--margins 0,0.02,0.05] [--windows 3,5,9]
-      [--tile 32] [--blend 1] [--gate] [--sintel alley_1,market_5] [--sintel-size 218,512]
+      [--tile 32] [--blend 1] [--gate] [--flow JSON] [--sintel alley_1,market_5] [--sintel-size 218,512]
       [--sintel-epochs 8] [--seed 0] [--out /tmp/selfcheck_check] [--fresh]
 Scenes are benchmarks/bootstrap_suite.py's (index = its seed). ``--gate`` makes the targets with
 the evidence gate (bone+pixel, search 3). The whole method with the self-check on is
@@ -28,6 +28,7 @@ benchmarks/bootstrap_suite.py with ``--self-check photometric``.
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import sys
 import time
@@ -82,14 +83,15 @@ def agreement(scene, initial, tuned, person, record, weight, tie: float) -> dict
 
 def run_scene(name: str, scene, mode: str, epochs: int, args) -> dict:
     """Initial and tuned flows and the person region of one bootstrap run (flow_1 only), cached."""
-    cache = Path(args.out) / f"{name}{'_gate' if args.gate else ''}.pt"
+    tag = ("_gate" if args.gate else "") + ("_" + args.flow.replace(" ", "").replace('"', "") if args.flow != "{}" else "")
+    cache = Path(args.out) / f"{name}{tag}.pt"
     if cache.is_file() and not args.fresh:
         return torch.load(cache)
     out = Path(args.out) / name
     shutil.rmtree(out, ignore_errors=True)
-    flow = {"weights": args.weights, **({"sketch": GATE} if args.gate else {})}
+    flow = {"weights": args.weights, **({"sketch": GATE} if args.gate else {}), **json.loads(args.flow)}
     boot = Bootstrap(scene, out, mode=mode, flow=flow, flow_epochs=epochs, cycles=0, video=False, progress_bar=False,
-                     seed=args.seed)  # fmt: skip
+                     self_check="off", seed=args.seed)  # fmt: skip
     start = time.perf_counter()
     result = boot.run()
     print(f"{name}: flow_1 in {time.perf_counter() - start:.0f} s", flush=True)
@@ -161,6 +163,7 @@ def main() -> None:
     p.add_argument("--tile", type=int, default=32)
     p.add_argument("--blend", type=int, default=1)
     p.add_argument("--gate", action="store_true", help="targets with the evidence gate (bone+pixel, search 3)")
+    p.add_argument("--flow", default="{}", help="FlowTTT options over the preset's, JSON")
     p.add_argument("--tie", type=float, default=0.005, help="px: GT EPE differences below this are ties")
     p.add_argument("--sintel", default="alley_1,market_5", help="Sintel samples (2D mode, MediaPipe); '' for none")
     p.add_argument("--sintel-size", default="218,512", help="H,W")
