@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import torch
 
-from ..core import Scene, get_layout
+from ..core import Scene, get_layout, inside_image
 from ..flow.evidence import photometric_error, track_error
 from ..metrics import acceleration_error, epe_at_points, flow_errors, mpjpe, pa_mpjpe
 
@@ -46,10 +46,6 @@ def pose_points(scene: Scene, mode: str, threshold: float = 0.0) -> tuple[torch.
     return points, keep
 
 
-def _inside(points: torch.Tensor, height: int, width: int) -> torch.Tensor:
-    return (points[..., 0] >= 0) & (points[..., 0] <= width - 1) & (points[..., 1] >= 0) & (points[..., 1] <= height - 1)
-
-
 @torch.no_grad()
 def agreement(flows: torch.Tensor, points: torch.Tensor, keep: torch.Tensor) -> float:
     """Mean |flow(p_t) - (p_t+1 - p_t)| px over pairs and kept joints inside the image.
@@ -59,7 +55,7 @@ def agreement(flows: torch.Tensor, points: torch.Tensor, keep: torch.Tensor) -> 
     """
     H, W = flows.shape[-2:]
     p0, p1 = points[:-1].float(), points[1:].float()
-    visible = keep[:-1] & keep[1:] & _inside(p0, H, W)
+    visible = keep[:-1] & keep[1:] & inside_image(p0, H, W)
     err = epe_at_points(flows.float(), p0, p1 - p0, visible, mode="bilinear")
     n = visible.sum()
     return float(err.sum() / n) if n else float("nan")
@@ -82,7 +78,7 @@ def flow_metrics(scene: Scene, flows: torch.Tensor) -> dict[str, float]:
     if gt.joints2d is not None:
         j = gt.joints2d.float()
         H, W = flows.shape[-2:]
-        visible = _inside(j[:-1], H, W)
+        visible = inside_image(j[:-1], H, W)
         err = epe_at_points(flows, j[:-1], j[1:] - j[:-1], visible, mode="nearest")
         out["epe_joints"] = float(err.sum() / visible.sum()) if visible.any() else float("nan")
     return out

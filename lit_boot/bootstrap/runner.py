@@ -226,9 +226,9 @@ class Bootstrap:
         result = refine_poses_stage(st.scene, st.flows, cfg.mode, cfg.pose_kwargs(), cfg.pose_steps, cfg.early_stop,
                                     cfg.pose_accelerator, self._loggers(name), cfg.progress_bar)  # fmt: skip
         refined = result.apply_to(st.scene)
-        record = {**pose_metrics(refined, cfg.mode),
-                  "agreement_px": agreement(st.flows, *pose_points(refined, cfg.mode)),
-                  "track_error": pose_track_error(refined.frames, *pose_points(refined, cfg.mode)),
+        points = pose_points(refined, cfg.mode)
+        record = {**pose_metrics(refined, cfg.mode), "agreement_px": agreement(st.flows, *points),
+                  "track_error": pose_track_error(refined.frames, *points),
                   "info": {"steps": result.steps, "stopped_early": result.stopped_early,
                            "loss": result.loss}}  # fmt: skip
         return record, result
@@ -251,11 +251,11 @@ class Bootstrap:
                 raise NonFiniteError(f"{self.out}: pretrained RAFT's flow is not finite at precision {st.precision} "
                                      "(try precision 32-true)", err.fault) from None  # fmt: skip
             st.initial = torch.stack(flows).mean(0)
+            points = pose_points(st.scene, cfg.mode)
             record = {"stage": "initial", "kind": "initial", "cycle": 0, **flow_metrics(st.scene, st.initial),
                       **pose_metrics(st.scene, cfg.mode),
-                      "agreement_px": agreement(st.initial, *pose_points(st.scene, cfg.mode)),
-                      "photo_error": photo_error(st.scene.frames, st.initial),
-                      "track_error": pose_track_error(st.scene.frames, *pose_points(st.scene, cfg.mode)),
+                      "agreement_px": agreement(st.initial, *points), "photo_error": photo_error(st.scene.frames, st.initial),
+                      "track_error": pose_track_error(st.scene.frames, *points),
                       "info": {"seconds": time.perf_counter() - start, "person_px": st.person_px}}  # fmt: skip
             folder.mkdir(parents=True, exist_ok=True)
             write_flows_npz(folder / "flows.npz", st.initial)

@@ -26,11 +26,19 @@ __all__ = [
     "project_weak_perspective",
     "project_pinhole",
     "fit_weak_perspective",
+    "inside_image",
 ]
 
 CAMERA_MODELS = ("weak_perspective", "pinhole")
 #: Number of per-frame parameters of each camera model.
 CAMERA_NUM_PARAMS = {"weak_perspective": 3, "pinhole": 7}
+
+
+def inside_image(points: torch.Tensor, height: int, width: int) -> torch.Tensor:
+    """(...) bool: True where the point (..., 2) px (x, y; pixel centres at integer coordinates)
+    lies within an image of ``height`` x ``width`` (NaN points: False)."""
+    upper = points.new_tensor([width - 1, height - 1])
+    return ((points >= 0) & (points <= upper)).all(dim=-1)
 
 
 def project_weak_perspective(

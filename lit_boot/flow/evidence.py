@@ -28,6 +28,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from ..core import inside_image
+
 __all__ = [
     "Evidence",
     "census_error",
@@ -188,11 +190,9 @@ def track_error(image1: Tensor, image2: Tensor, points1: Tensor, points2: Tensor
     height, width = image1.shape[-2:]
 
     def sample(image: Tensor, points: Tensor) -> tuple[Tensor, Tensor]:
-        inside = (points[..., 0] >= 0) & (points[..., 0] <= width - 1) & (points[..., 1] >= 0)
-        inside = inside & (points[..., 1] <= height - 1)
         grid = torch.nan_to_num(points.float(), 0.0) * 2 / points.new_tensor([max(width - 1, 1), max(height - 1, 1)]) - 1
         signature = F.grid_sample(census_transform(image, radius), grid[:, :, None].float(), align_corners=True)
-        return signature[..., 0], inside
+        return signature[..., 0], inside_image(points, height, width)
 
     s1, in1 = sample(image1, points1)
     s2, in2 = sample(image2, points2)

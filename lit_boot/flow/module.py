@@ -21,6 +21,7 @@ import torch.nn.functional as F
 from kornia.morphology import dilation
 from lightning.pytorch.utilities import rank_zero_warn
 
+from ..core import inside_image
 from ..finite import FiniteGuard
 from ..metrics import EndPointError, PointEndPointError
 from .gate import gate_sketch
@@ -271,8 +272,7 @@ class FlowTTT(L.LightningModule):
         if "gt_joints" in batch:
             joints = batch["gt_joints"]
             H, W = flow.shape[-2:]
-            inside = (joints[..., 0] >= 0) & (joints[..., 0] <= W - 1) & (joints[..., 1] >= 0) & (joints[..., 1] <= H - 1)
-            self.val_epe_joints.update(flow, joints, batch["gt_joints_next"] - joints, inside)
+            self.val_epe_joints.update(flow, joints, batch["gt_joints_next"] - joints, inside_image(joints, H, W))
         if self.original is not None and self.sketch_masks is not None:
             outside = ~self.person_region(self.sketch_masks[idx]).to(self.device)
             self.val_drift.update(flow, self.original[idx].to(self.device), outside)

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 import torch
 import torch.nn.functional as F
 
+from ..core import inside_image as core_inside_image
 from ..metrics import sample_flow_at_points
 
 __all__ = [
@@ -123,6 +124,5 @@ def bone_length_loss(joints: torch.Tensor, bones: Sequence[tuple[int, int]] | to
     return temporal_loss(bone_lengths(joints, bones))
 
 def inside_image(points: torch.Tensor, height: int, width: int) -> torch.Tensor:
-    """(..., J) float: 1 where the point (..., J, 2) px lies within the image, else 0."""
-    upper = points.new_tensor([width - 1, height - 1])
-    return ((points >= 0) & (points <= upper)).all(dim=-1).float()
+    """(..., J) float: 1 where the point (..., J, 2) px lies within the image, else 0 (core's test)."""
+    return core_inside_image(points, height, width).float()
