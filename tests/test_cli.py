@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from lit_boot.cli import main
-from lit_boot.console import drop_native_noise
+from lit_boot.cli.console import drop_native_noise
 from lit_boot.data import load_scene, read_png
 from lit_boot.synth import EstimateConfig, SynthConfig, make_scene
 

@@ -11,6 +11,7 @@ cleared, even with ``overwrite``.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
 import uuid
@@ -21,6 +22,8 @@ from ..data.atomic import atomic_write_bytes, remove_partials
 from .lock import LOCK_FILE
 
 __all__ = ["RunFolder", "CONFIG_JSON", "STAGE_JSON"]
+
+log = logging.getLogger(__name__)
 
 CONFIG_JSON = "config.json"
 STAGE_JSON = "stage.json"
@@ -50,7 +53,7 @@ class RunFolder:
         (``settings``); delete what interrupted atomic writes left. Call it holding the lock."""
         action, why = self._decide(settings)
         if action == "replace":
-            print(f"[lit-boot] {self.path}: replacing a run that finished no stage ({why})", flush=True)
+            log.warning("[lit-boot] %s: replacing a run that finished no stage (%s)", self.path, why)
         if action != "resume":
             self._clear()
         self.path.mkdir(parents=True, exist_ok=True)

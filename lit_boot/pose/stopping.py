@@ -10,12 +10,15 @@ honours before the next step (after ``min_steps``, if set).
 
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 import lightning as L
 from lightning.pytorch.callbacks import Callback
 
 __all__ = ["LossPlateauStopping"]
+
+log = logging.getLogger(__name__)
 
 
 class LossPlateauStopping(Callback):
@@ -24,7 +27,7 @@ class LossPlateauStopping(Callback):
     Args:
         decimals: rounding of the loss before comparing (the authors: 4).
         patience: consecutive unchanged steps that stop the run (the authors: 10).
-        verbose: print a line when stopping.
+        verbose: log the stop at INFO (shown by ``lit-boot``); otherwise at DEBUG.
 
     After fitting, ``stopped_step`` is the global step at which it stopped (None if it did not).
     """
@@ -55,8 +58,9 @@ class LossPlateauStopping(Callback):
         if self._unchanged >= self.patience and not trainer.should_stop:
             trainer.should_stop = True
             self.stopped_step = trainer.global_step
-            if self.verbose:
-                print(f"LossPlateauStopping: loss {value} unchanged for {self.patience} steps; stop at step {trainer.global_step}")
+            log.log(logging.INFO if self.verbose else logging.DEBUG,
+                    "LossPlateauStopping: loss %s unchanged for %d steps; stop at step %d",
+                    value, self.patience, trainer.global_step)  # fmt: skip
 
     def state_dict(self) -> dict[str, Any]:
         return {"last": self._last, "unchanged": self._unchanged, "stopped_step": self.stopped_step}

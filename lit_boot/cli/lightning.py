@@ -1,13 +1,15 @@
-"""Lightning's CLI for lit-boot: ``lit-boot fit|validate|predict --config FILE``.
+"""``lit-boot fit|validate|predict --config FILE``: Lightning's CLI over lit-boot's modules and data.
 
-The model and the data are chosen by the config (``model.class_path``, ``data.class_path``), so
-FlowTTT and the later stages share one command. Without ``trainer.default_root_dir`` a run goes
-to ``runs/<scene folder name>/<model class name>``.
+:class:`LitBootCLI` subclasses LightningCLI. The model and the data are chosen by the config
+(``model.class_path``, ``data.class_path``), so FlowTTT and the later stages share one command.
+Without ``trainer.default_root_dir`` a run goes to ``runs/<scene folder name>/<model class name>``.
 
 As lit-boot's own commands: no abbreviated options, a bad argument raises
 :class:`argparse.ArgumentError`, and a model or data that cannot be built (missing scene, bad
-weights file) raises :class:`~lit_boot.console.CliError` with the reason in one line, before
+weights file) raises :class:`~lit_boot.cli.console.CliError` with the reason in one line, before
 any run folder exists. A run that fails before it trained anything leaves no folder behind.
+
+Imports Lightning: :mod:`lit_boot.cli` imports this module only when one of these commands runs.
 """
 
 from __future__ import annotations
@@ -18,18 +20,19 @@ from fnmatch import fnmatch
 from pathlib import Path
 
 import lightning as L
+from lightning.pytorch.callbacks import Callback, ModelSummary, ProgressBar, TQDMProgressBar
 from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
 
 from .console import CliError, HelpFormatter, error_line
 
-__all__ = ["LitBootArgumentParser", "LitBootCLI", "run_lightning_cli"]
+__all__ = ["LitBootArgumentParser", "LitBootCLI", "lightning", "run_lightning_cli"]
 
 #: Files a Lightning run writes before it has done anything: a folder holding only these is no loss.
 BOOKKEEPING = ("events.out.tfevents.*", "hparams.yaml", "config.yaml", "metrics.csv")
 
 
 class LitBootArgumentParser(LightningArgumentParser):
-    """Lightning's parser with lit-boot's defaults (see :class:`lit_boot.console.ArgumentParser`)."""
+    """Lightning's parser with lit-boot's defaults (see :class:`lit_boot.cli.console.ArgumentParser`)."""
 
     def __init__(self, *args, allow_abbrev: bool = False, exit_on_error: bool = False, **kwargs) -> None:
         kwargs.setdefault("formatter_class", HelpFormatter)
@@ -37,8 +40,8 @@ class LitBootArgumentParser(LightningArgumentParser):
 
 
 class LitBootCLI(LightningCLI):
-    """LightningCLI with a per-scene default run folder, one-line build errors, and no empty run
-    folders left by a failed run."""
+    """LightningCLI with a per-scene default run folder, one-line build errors, no empty run
+    folders left by a failed run, and the plain progress bar and model summary."""
 
     def before_instantiate_classes(self) -> None:
         config = self.config[self.subcommand] if self.subcommand else self.config
@@ -57,6 +60,16 @@ class LitBootCLI(LightningCLI):
             config = self.config[self.subcommand] if self.subcommand else self.config
             raise CliError(build_error(err, config)) from err
 
+    def instantiate_trainer(self, **kwargs) -> L.Trainer:
+        """Lightning's Trainer, with tqdm's progress bar and the logged model summary unless the
+        config names others or turns them off. (Lightning >= 2.6 picks rich's when rich is
+        installed, as import-linter in the dev extra does; rich's summary table would be printed
+        past :func:`~lit_boot.cli.console.command_output`.)"""
+        trainer = {**self._get(self.config_init, "trainer", default={}), **kwargs}
+        configured = trainer.get("callbacks") or []
+        configured = configured if isinstance(configured, list) else [configured]
+        return super().instantiate_trainer(**kwargs, callbacks=[*configured, *plain_callbacks(trainer, configured)])
+
     def _run_subcommand(self, subcommand: str) -> None:
         roots = {Path(self.trainer.default_root_dir).resolve()}
         roots |= {Path(logger.save_dir).resolve() for logger in self.trainer.loggers if logger.save_dir}
@@ -68,6 +81,17 @@ class LitBootCLI(LightningCLI):
                 for root, existed in before.items():
                     remove_new_bookkeeping(root, existed)
             raise
+
+
+def plain_callbacks(trainer: dict, configured: list[Callback]) -> list[Callback]:
+    """The progress bar and model summary callbacks a Trainer with arguments ``trainer`` and
+    callbacks ``configured`` would add itself, as tqdm's and the plain (logged) ones."""
+    missing = []
+    if trainer.get("enable_progress_bar") is not False and not any(isinstance(c, ProgressBar) for c in configured):
+        missing.append(TQDMProgressBar())
+    if trainer.get("enable_model_summary") is not False and not any(isinstance(c, ModelSummary) for c in configured):
+        missing.append(ModelSummary())
+    return missing
 
 
 def build_error(err: BaseException, config) -> str:
@@ -109,3 +133,10 @@ def run_lightning_cli(argv: list[str]) -> LitBootCLI:
         save_config_kwargs={"overwrite": True},
         parser_class=LitBootArgumentParser,
     )
+
+
+def lightning(argv: list[str]) -> int:
+    """``lit-boot fit|validate|predict`` (``argv``: the subcommand first): run it, name the run folder."""
+    trainer = run_lightning_cli(argv).trainer
+    print(f"run folder: {trainer.default_root_dir} (this run's logs: {trainer.log_dir})")
+    return 0

@@ -1,12 +1,16 @@
-"""What the ``lit-boot`` command prints: its own lines, progress bars, and errors as one line.
+"""What the ``lit-boot`` command prints: its own lines, progress bars, and errors as one line;
+and the parsers' shared pieces.
 
 Cheap to import (no torch, no Lightning): the command line parses, and answers ``--help``, first.
 
 - :class:`ArgumentParser`: jsonargparse's parser with the command line's defaults (no abbreviated
-  options; a bad argument raises instead of printing the whole usage);
-- :func:`command_output`: around each command: Lightning's info lines (accelerator summary,
-  tips, model summary, "Seed set to") and the known dependency warnings off; lit-boot's own
-  log records to stdout; ``lit-boot --verbose`` (or ``LIT_BOOT_VERBOSE=1``) keeps everything;
+  options; a bad argument raises instead of printing the whole usage); :func:`dataclass_from`
+  builds a settings dataclass from the options its fields made; :func:`set_help` fills or
+  replaces the help of options made from a signature; :func:`refuse_to_overwrite` guards ``--out``;
+- :func:`command_output`: around each command: lit-boot's log records (``lit_boot.*``) to stdout
+  as plain lines; Lightning's info lines (accelerator summary, tips, model summary, "Seed set
+  to") and the known dependency warnings off; ``lit-boot --verbose`` (or ``LIT_BOOT_VERBOSE=1``)
+  keeps everything;
 - :func:`error_line`: an exception (jsonargparse's multi-line ones included) as one line;
 - :func:`drop_native_noise`: MediaPipe's native start-up lines removed from stderr.
 """
@@ -14,6 +18,7 @@ Cheap to import (no torch, no Lightning): the command line parses, and answers `
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import os
 import re
@@ -22,11 +27,13 @@ import threading
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, get_type_hints
 
 import jsonargparse
 
-__all__ = ["ArgumentParser", "CliError", "HelpFormatter", "command_output", "drop_native_noise", "error_line",
-           "is_user_error", "plain", "verbose_requested"]
+__all__ = ["ArgumentParser", "CliError", "HelpFormatter", "command_output", "dataclass_from", "drop_native_noise",
+           "error_line", "is_user_error", "plain", "refuse_to_overwrite", "set_help", "verbose_requested"]
 
 #: Lightning loggers whose INFO records are noise on the command line (WARNING and up stay).
 LIGHTNING_INFO_LOGGERS = (
@@ -91,6 +98,36 @@ class ArgumentParser(jsonargparse.ArgumentParser):
         super().__init__(*args, allow_abbrev=allow_abbrev, exit_on_error=exit_on_error, **kwargs)
 
 
+def dataclass_from(args: jsonargparse.Namespace, cls: type) -> Any:
+    """An instance of the dataclass ``cls`` from parsed options named after its fields (added by
+    ``add_class_arguments(cls, nested_key=None)``); a nested dataclass field's options
+    (``--estimates.mpjpe_mm``) make that field's instance. Fields without an option (skipped
+    when the parser was built) keep their defaults."""
+    hints = get_type_hints(cls)
+
+    def value(name: str) -> Any:
+        given, hint = args[name], hints[name]
+        nested = isinstance(hint, type) and dataclasses.is_dataclass(hint) and isinstance(given, jsonargparse.Namespace)
+        return dataclass_from(given, hint) if nested else given
+
+    return cls(**{f.name: value(f.name) for f in dataclasses.fields(cls) if f.init and f.name in args})
+
+
+def set_help(parser: jsonargparse.ArgumentParser, helps: dict[str, str], replace: bool = False) -> None:
+    """Give the options ``helps`` names (by destination) that help text: only where they have none
+    (jsonargparse takes help from "Args:" docstrings), or always with ``replace``."""
+    for action in parser._actions:
+        if action.dest in helps and (replace or action.help is None):
+            action.help = helps[action.dest]
+
+
+def refuse_to_overwrite(out: Path, overwrite: bool, what: str = "it") -> None:
+    """Raise :class:`CliError` when ``--out`` ``out`` exists and is not an empty folder, unless
+    ``overwrite``; the message says to pass ``--overwrite true`` to replace ``what``."""
+    if out.exists() and not overwrite and (not out.is_dir() or any(out.iterdir())):
+        raise CliError(f"--out {out}: exists and is not empty (pass --overwrite true to replace {what})")
+
+
 def verbose_requested() -> bool:
     """True when ``LIT_BOOT_VERBOSE`` is set to anything but ``""``/``0``."""
     return os.environ.get("LIT_BOOT_VERBOSE", "") not in ("", "0")
@@ -113,18 +150,20 @@ class _Stdout(logging.StreamHandler):
 
 @contextmanager
 def command_output(verbose: bool = False) -> Iterator[None]:
-    """Within the block (one command): lit-boot's log records (``lit_boot.*``, INFO and up) go to
-    stdout as plain lines; unless ``verbose``, Lightning's info lines and :data:`KNOWN_WARNINGS`
-    are dropped and every other warning from Lightning or torch* shows once per message (not once
-    per stage). Restored after."""
+    """Within the block (one command): lit-boot's log records (``lit_boot.*``, INFO and up; DEBUG
+    too with ``verbose``) go to stdout as plain lines, and only there (not on to the root
+    logger's handlers); unless ``verbose``, Lightning's info lines and :data:`KNOWN_WARNINGS` are
+    dropped and every other warning from Lightning or torch* shows once per message (not once
+    per stage). The handler is removed and the levels restored after."""
     global _verbose
     ours = logging.getLogger("lit_boot")
     handler = _Stdout()
     handler.setFormatter(logging.Formatter("%(message)s"))
     loggers = [ours, *map(logging.getLogger, LIGHTNING_INFO_LOGGERS)]
-    levels = [logger.level for logger in loggers]
+    levels, propagate = [logger.level for logger in loggers], ours.propagate
     ours.addHandler(handler)
     ours.setLevel(logging.DEBUG if verbose else logging.INFO)
+    ours.propagate = False
     was_verbose, _verbose = _verbose, verbose
     with warnings.catch_warnings():
         if not verbose:
@@ -139,6 +178,7 @@ def command_output(verbose: bool = False) -> Iterator[None]:
         finally:
             _verbose = was_verbose
             ours.removeHandler(handler)
+            ours.propagate = propagate
             for logger, level in zip(loggers, levels):
                 logger.setLevel(level)
 

@@ -1,6 +1,7 @@
-"""``lit-boot import KIND ... --out DIR``: a dataset scene or a video as a lit-boot scene folder.
+"""Data in: ``lit-boot import KIND ... --out DIR`` (a dataset scene or a video as a lit-boot scene
+folder) and ``lit-boot estimate-pose VIDEO --out FILE`` (MediaPipe Pose to a pose file).
 
-Kinds and their readers (every reader argument is a flag; positional ones come first):
+Kinds of ``import`` and their readers (every reader argument is a flag; positional ones come first):
 
 - ``sintel ROOT SCENE``: :func:`lit_boot.data.readers.read_sintel` (frames + GT flow)
 - ``3dpw ROOT SEQUENCE``: :func:`lit_boot.data.readers.read_3dpw` (frames, OpenPose keypoints, GT)
@@ -26,9 +27,9 @@ from functools import cache
 from pathlib import Path
 from typing import Any, Callable
 
-from .console import ArgumentParser, drop_native_noise, plain
+from .console import ArgumentParser, CliError, drop_native_noise, plain, refuse_to_overwrite, set_help
 
-__all__ = ["import_scene", "import_parser", "KINDS"]
+__all__ = ["import_scene", "import_parser", "estimate_pose", "estimate_pose_parser", "with_poses", "KINDS"]
 
 #: Kind -> (module in lit_boot.data.readers, reader function).
 KINDS = {"sintel": ("sintel", "read_sintel"), "3dpw": ("pw3d", "read_3dpw"), "h36m": ("h36m", "read_h36m"),
@@ -77,7 +78,7 @@ def describe(kind: str) -> str:
     """The first paragraph of ``kind``'s reader docstring, one line, without reST markup (read
     from the source, importing nothing)."""
     module, name = KINDS[kind]
-    source = (Path(__file__).parent / "data" / "readers" / f"{module}.py").read_text(encoding="utf-8")
+    source = (Path(__file__).parents[1] / "data" / "readers" / f"{module}.py").read_text(encoding="utf-8")
     node = next(n for n in ast.walk(ast.parse(source)) if isinstance(n, ast.FunctionDef) and n.name == name)
     return plain(" ".join((ast.get_docstring(node) or "").split("\n\n", 1)[0].split()))
 
@@ -102,10 +103,7 @@ def import_parser(kinds: Iterable[str] | None = None) -> ArgumentParser:
 
 def _add_reader_arguments(parser: ArgumentParser, kind: str) -> None:
     parser.add_function_arguments(_reader(kind), nested_key=None, as_positional=True, as_group=False, skip={"poses"})
-    helps = {**ARG_HELP, **ARG_HELP_BY_KIND.get(kind, {})}
-    for action in parser._actions:  # jsonargparse takes help from "Args:" docstrings; the readers have prose
-        if action.help is None and action.dest in helps:
-            action.help = helps[action.dest]
+    set_help(parser, {**ARG_HELP, **ARG_HELP_BY_KIND.get(kind, {})})  # the readers' docstrings are prose, no "Args:"
 
 
 def with_poses(scene, poses: Path | None, estimate: bool):
@@ -113,11 +111,11 @@ def with_poses(scene, poses: Path | None, estimate: bool):
     if poses is not None and estimate:
         raise ValueError("--poses and --estimate: give one of them, not both")
     if poses is not None:
-        from .data.readers import read_estimates
+        from ..data.readers import read_estimates
 
         return read_estimates(poses).apply_to(scene)
     if estimate:
-        from .estimate import estimate_poses
+        from ..estimate import estimate_poses
 
         with drop_native_noise():  # MediaPipe's native start-up lines
             return estimate_poses(scene.frames).apply_to(scene)
@@ -127,13 +125,12 @@ def with_poses(scene, poses: Path | None, estimate: bool):
 def import_scene(argv: list[str]) -> int:
     """``lit-boot import``: read, attach poses, save the scene folder, print its summary."""
     args = import_parser([argv[0]] if argv[:1] and argv[0] in KINDS else []).parse_args(argv)
-    from .data import save_scene
+    from ..data import save_scene
 
     options = dict(vars(args[args.kind]))
     poses, estimate = options.pop("poses"), options.pop("estimate")
     out, overwrite = options.pop("out"), options.pop("overwrite")
-    if out.exists() and not overwrite and (not out.is_dir() or any(out.iterdir())):
-        raise FileExistsError(f"--out {out}: exists and is not empty (pass --overwrite true to replace it)")
+    refuse_to_overwrite(out, overwrite)
     if args.kind == "video" and not estimate:  # read_video selects and checks the pose rows itself
         scene = _reader("video")(**options, poses=poses)
     else:
@@ -141,4 +138,41 @@ def import_scene(argv: list[str]) -> int:
     save_scene(scene, out, overwrite=overwrite)
     print(scene.summary())
     print(f"wrote {out}")
+    return 0
+
+
+def estimate_pose_parser() -> ArgumentParser:
+    """The parser of ``lit-boot estimate-pose``. Its options are written out here, not read from
+    :func:`lit_boot.estimate.estimate_poses`'s signature: that module imports torch, and the
+    help must not."""
+    parser = ArgumentParser(prog="lit-boot estimate-pose", description=(
+        "Estimate one person's pose in every frame of a video with MediaPipe Pose (pip install "
+        '"lit-boot[mediapipe]"): COCO-17 keypoints, LSP-14 3D joints and weak-perspective cameras.'))  # fmt: skip
+    parser.add_argument("video", type=Path, help="a video file (e.g. .mp4) or a folder of frames")
+    parser.add_argument("--out", type=Path, required=True, help="pose file to write (.npz or .json)")
+    parser.add_argument("--stride", type=int, default=1, help="use every N-th frame")
+    parser.add_argument("--max_frames", "--max-frames", type=int | None, default=None, help="use at most N frames")
+    parser.add_argument("--resize", type=int | float | None, default=None,
+                        help="resize frames first: a height in px (int, e.g. 360) or a scale (float, e.g. 0.5)")  # fmt: skip
+    parser.add_argument("--model_complexity", "--model-complexity", type=int, default=1,
+                        help="0, 1 or 2 (only 1 ships with mediapipe; 0 and 2 are downloaded on first use)")  # fmt: skip
+    parser.add_argument("--min_detection_confidence", "--min-detection-confidence", type=float, default=0.5,
+                        help="MediaPipe's person detector threshold")  # fmt: skip
+    parser.add_argument("--on_jump", "--on-jump", type=str, default="keep", help="keep or drop detections that jump")
+    parser.add_argument("--overwrite", type=bool, nargs="?", const=True, default=False, help="replace --out")
+    return parser
+
+
+def estimate_pose(argv: list[str]) -> int:
+    """``lit-boot estimate-pose``: MediaPipe Pose on a video -> pose file; one summary line."""
+    args = estimate_pose_parser().parse_args(argv)
+    from ..estimate import MediaPipeUnavailable, estimate_pose_file
+
+    options = {k: v for k, v in vars(args).items() if k not in ("video", "out", "overwrite")}
+    try:
+        with drop_native_noise():
+            _, summary = estimate_pose_file(args.video, args.out, overwrite=args.overwrite, **options)
+    except MediaPipeUnavailable as err:
+        raise CliError(str(err)) from None
+    print(f"{summary}; wrote {args.out}")
     return 0
