@@ -78,25 +78,20 @@ def raw_run(scene, steps: int) -> None:
 
 
 def unfused_run(scene, steps: int) -> None:
-    """The raw loop with every term reduced on its own (the pure functions of losses.py)."""
-    from lit_boot.pose.losses import (bone_length_loss, deviation_loss, flow_consistency_loss, keypoint_loss,
-                                      temporal_loss)
-    from lit_boot.pose.refiner import inside_image
+    """The raw loop with every term reduced on its own (one SmoothL1 and one dot product per
+    term, the Objective's weights split by term) instead of the fused single pass."""
+    import torch.nn.functional as F
 
     before = torch.get_num_threads()
     torch.set_num_threads(1)
     model = PoseRefiner(save=False)
     model.prepare(scene, scene.gt.flow)
-    w = model.weights
+    weights = model.objective.weights.split(model.objective.sizes)
     optimizer = torch.optim.Adam(model.parameters(), lr=model.hparams.lr, fused=True)
     for _ in range(steps):
         optimizer.zero_grad()
-        X, P = model.joints, model.projected()
-        loss = (w.opt * flow_consistency_loss(P, model.flows, inside_image(P[:-1].detach(), *model.image_size))
-                + w.joints3d * deviation_loss(X, model.initial_joints)
-                + w.keypoints2d * keypoint_loss(P, model.keypoints, model.keypoint_weight)
-                + w.pos * temporal_loss(X) + w.cam * temporal_loss(model.camera_vars)
-                + w.bone * bone_length_loss(X, model.bones))  # fmt: skip
+        loss = sum(torch.dot(F.smooth_l1_loss(r.reshape(-1), torch.zeros_like(w), reduction="none"), w)
+                   for r, w in zip(model.residuals(), weights))  # fmt: skip
         loss.backward()
         optimizer.step()
     torch.set_num_threads(before)

@@ -43,8 +43,8 @@ SCENES = {
     "wave_s3": dict(motion="wave", seed=3, amplitude=1.5),
     "hop_bvh_s4": dict(motion="bvh", seed=4, bvh=str(SHARED / "data/mocap/cmu_131/131_03.bvh"), bvh_start=3.0),
 }
-METRICS = ("eval/mpjpe_mm", "eval/pa_mpjpe_mm", "eval/accel_mm_per_frame2")
-SHORT = {"eval/mpjpe_mm": "MPJPE", "eval/pa_mpjpe_mm": "PA-MPJPE", "eval/accel_mm_per_frame2": "Accel"}
+METRICS = ("mpjpe_mm", "pa_mpjpe_mm", "accel_mm_per_frame2")
+SHORT = {"mpjpe_mm": "MPJPE", "pa_mpjpe_mm": "PA-MPJPE", "accel_mm_per_frame2": "Accel"}
 FULL = PoseLossWeights()
 ABLATION = {
     "L_3D": PoseLossWeights(opt=0, keypoints2d=0, pos=0, cam=0, bone=0),
@@ -88,7 +88,7 @@ def joint_epe(flows: torch.Tensor, scene) -> float:
 
 
 def run(scene, flows, weights: PoseLossWeights, args) -> dict:
-    result = refine_poses(scene, flows, steps=args.steps, early_stop=not args.no_early_stop, weights=weights,
+    result = refine_poses(scene, flows, steps=args.steps, early_stop=not args.no_early_stop, loss_weights=weights,
                           pixel_scale=args.pixel_scale)  # fmt: skip
     return {"before": result.metrics_before, "after": result.metrics_after, "steps": result.steps,
             "seconds": result.seconds, "loss": result.loss}  # fmt: skip
@@ -137,7 +137,7 @@ def main() -> None:
                 entry[f"ablation_{kind}"] = {label: run(scene, flows, w, args)["after"] for label, w in ABLATION.items()
                                              if kind == "gt" or "L_opt" in label}  # fmt: skip
         report["scenes"][name] = entry
-        print(name, {k: (round(entry[k]["before"]["eval/mpjpe_mm"], 2), round(entry[k]["after"]["eval/mpjpe_mm"], 2))
+        print(name, {k: (round(entry[k]["before"]["mpjpe_mm"], 2), round(entry[k]["after"]["mpjpe_mm"], 2))
                      for k in kinds}, flush=True)  # fmt: skip
     report["seconds"] = time.perf_counter() - start
     print_tables(report, kinds, args.ablation)
@@ -170,7 +170,7 @@ def print_tables(report: dict, kinds: list[str], ablation: bool) -> None:
     print(fmt_row(["---"] * 6))
     init = [e[kinds[0]]["before"] for e in scenes.values()]
     print(fmt_row(["initial (METRO-like)", "-"] + [f"{np.mean([i[m] for i in init]):.2f}" for m in METRICS]
-                  + [" ".join(f"{i['eval/mpjpe_mm']:.1f}" for i in init)]))  # fmt: skip
+                  + [" ".join(f"{i['mpjpe_mm']:.1f}" for i in init)]))  # fmt: skip
     for kind in kinds:
         for label in ABLATION:
             res = [e[f"ablation_{kind}"][label] for e in scenes.values() if label in e[f"ablation_{kind}"]]
@@ -178,7 +178,7 @@ def print_tables(report: dict, kinds: list[str], ablation: bool) -> None:
                 continue
             flow = kind if "L_opt" in label else "-"
             print(fmt_row([label, flow] + [f"{np.mean([r[m] for r in res]):.2f}" for m in METRICS]
-                          + [" ".join(f"{r['eval/mpjpe_mm']:.1f}" for r in res)]))  # fmt: skip
+                          + [" ".join(f"{r['mpjpe_mm']:.1f}" for r in res)]))  # fmt: skip
 
 
 def print_2d_table(report: dict, kinds: list[str]) -> None:
@@ -188,7 +188,7 @@ def print_2d_table(report: dict, kinds: list[str]) -> None:
     print(fmt_row(["---"] * len(header)))
     rows = []
     for name, e in report["scenes"].items():
-        vals = [e[f"2d_{kinds[0]}"]["before"]["eval/kp2d_px"]] + [e[f"2d_{k}"]["after"]["eval/kp2d_px"] for k in kinds]
+        vals = [e[f"2d_{kinds[0]}"]["before"]["kp2d_px"]] + [e[f"2d_{k}"]["after"]["kp2d_px"] for k in kinds]
         rows.append(vals)
         print(fmt_row([name] + [f"{v:.2f}" for v in vals]))
     print(fmt_row(["**mean**"] + [f"**{v:.2f}**" for v in np.mean(np.array(rows), axis=0)]))

@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bootstrap_suite import GATE, SCENES, SHARED  # noqa: E402
 
 from lit_boot.bootstrap import Bootstrap  # noqa: E402
-from lit_boot.bootstrap.evaluate import flow_metrics  # noqa: E402
+from lit_boot.metrics import scene_flow_metrics  # noqa: E402
 from lit_boot.bootstrap.selfcheck import region_labels, region_names, self_check  # noqa: E402
 from lit_boot.synth import make_scene  # noqa: E402
 
@@ -124,12 +124,12 @@ def report(runs: dict, args) -> None:
     for name, (scene, run) in runs.items():
         group = "sintel" if scene.gt.person_mask is None else "synthetic"
         initial, tuned, person = run["initial"].float(), run["tuned"].float(), run["person"]
-        m_i, m_t = flow_metrics(scene, initial), flow_metrics(scene, tuned)
+        m_i, m_t = scene_flow_metrics(scene.gt, initial), scene_flow_metrics(scene.gt, tuned)
         for margin in [float(s) for s in args.margins.split(",")]:
             for window in [int(s) for s in args.windows.split(",")]:
                 checked, record, weight = self_check(scene.frames, initial, tuned, person, margin, args.tile,
                                                      args.blend, window)  # fmt: skip
-                metrics = (m_i, m_t, flow_metrics(scene, checked))
+                metrics = (m_i, m_t, scene_flow_metrics(scene.gt, checked))
                 counts = agreement(scene, initial, tuned, person, record, weight, args.tie)
                 tot = totals.setdefault((group, margin, window), {"person": [0] * 4, "background": [0] * 4, "rel": []})
                 for kind in ("person", "background"):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import hashlib
 import json
 
@@ -11,9 +12,10 @@ import pytest
 import torch
 
 import lit_boot
-from lit_boot.bootstrap import Bootstrap, BootstrapConfig, agreement, bootstrap, pose_points
+from lit_boot.bootstrap import Bootstrap, BootstrapConfig, agreement, bootstrap
 from lit_boot.bootstrap import runner as runner_module
 from lit_boot.bootstrap.ensemble import average_poses
+from lit_boot.data.readers import PoseEstimates
 from lit_boot.pose import PoseResult
 
 FAST = dict(flow_epochs=1, pose_steps=15, progress_bar=False)
@@ -80,18 +82,27 @@ def test_agreement_is_zero_for_poses_moving_with_the_flow_and_measures_the_offse
 
 
 def test_pose_points_follow_the_mode(tiny_scene):
-    p3, k3 = pose_points(tiny_scene, "3d")
-    assert p3.shape == (4, 14, 2) and k3.all()
-    p2, k2 = pose_points(tiny_scene, "2d")
+    p3, k3 = tiny_scene.pose_points("3d")
+    assert p3.shape == (4, 14, 2) and k3.all() and tiny_scene.pose_layout("3d") == "lsp14"
+    torch.testing.assert_close(p3, tiny_scene.cameras.project(tiny_scene.joints3d.float()))
+    p2, k2 = tiny_scene.pose_points("2d")
     assert p2.shape == (4, 17, 2) and torch.equal(k2, tiny_scene.keypoints_conf > 0)
+    assert tiny_scene.pose_layout("2d") == "coco17"
+    with pytest.raises(ValueError, match="3D mode needs 3D joints with cameras"):
+        dataclasses.replace(tiny_scene, cameras=None).pose_points("3d")
+    with pytest.raises(ValueError, match="mode: expected one of"):
+        tiny_scene.pose_points("4d")
 
 
 def test_average_poses_means_the_estimates(tiny_scene, tmp_path):
     other = tiny_scene.joints3d + 10.0
-    PoseResult(mode="3d", layout="lsp14", joints3d=other, cameras=tiny_scene.cameras).save(tmp_path / "a")
-    mean = average_poses(tiny_scene, [str(tmp_path / "a")], "3d")
+    estimates = PoseEstimates(joints3d=other, cameras=tiny_scene.cameras)
+    PoseResult("3d", estimates).save(tmp_path / "a")
+    mean = average_poses(tiny_scene, [str(tmp_path / "a")], "3d")  # a refiner's folder
     assert torch.allclose(mean.joints3d, tiny_scene.joints3d + 5.0)
-    PoseResult(mode="3d", layout="lsp14", joints3d=other[:2], cameras=tiny_scene.cameras).save(tmp_path / "b")
+    mean = average_poses(tiny_scene, [str(tmp_path / "a" / "poses.npz")], "3d")  # or a pose file
+    assert torch.allclose(mean.joints3d, tiny_scene.joints3d + 5.0)
+    PoseResult("3d", estimates.take([0, 1])).save(tmp_path / "b")
     with pytest.raises(ValueError, match="joints3d shape"):
         average_poses(tiny_scene, [str(tmp_path / "b")], "3d")
 
@@ -106,7 +117,7 @@ def test_run_produces_every_output_and_improves_the_pose(shared, tiny_scene, tmp
     result = Bootstrap(scene_dir, tmp_path / "run", flow=fast_flow(shared), **FAST).run()
     assert folder_digest(scene_dir) == before  # the input is never written
     run = tmp_path / "run"
-    for name in ("config.json", "summary.json", "metrics.png", "overlay.mp4", "poses.npz", "poses.json",
+    for name in ("config.json", "summary.json", "metrics.png", "overlay.mp4", "poses.npz", "pose_report.json",
                  "raft_finetuned.pt", "flows/flow_000000.flo", "flows/flow_000002.png"):  # fmt: skip
         assert (run / name).is_file(), name
     assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1", "flow_2"]
@@ -157,7 +168,7 @@ def test_interrupted_run_resumes_after_the_last_finished_stage(shared, tiny_scen
 
 @pytest.mark.shared
 def test_drift_guard_rolls_back_a_stage_that_worsens_the_image_evidence(shared, tiny_scene, tmp_path, monkeypatch,
-                                                                        capsys):
+                                                                        caplog):
     photo = iter([1.0, 0.9])  # initial, flow_1: the flow explains the frames better
     tracks = iter([1.0, 1.2])  # initial, pose_1: the joint tracks 20% worse
     monkeypatch.setattr(runner_module, "photo_error", lambda *a, **k: next(photo))
@@ -170,7 +181,7 @@ def test_drift_guard_rolls_back_a_stage_that_worsens_the_image_evidence(shared, 
     summary = json.loads((tmp_path / "run/summary.json").read_text())
     assert summary["drift_guard_events"] == [{"stage": "pose_1", "guard": "drift", "evidence": "track_error",
                                               "before": 1.0, "after": 1.2, "action": "rollback"}]  # fmt: skip
-    assert "joint tracks' census error rose 1.000 -> 1.200; pose_1 rolled back" in capsys.readouterr().out
+    assert "joint tracks' census error rose 1.000 -> 1.200; pose_1 rolled back" in caplog.text  # logged, not printed
 
 
 def test_drift_guard_tolerance_and_record(tmp_path):

@@ -80,7 +80,7 @@ def test_validation_logs_epe_and_drift(scene, tmp_path):
 
 
 def test_validation_reports_the_orchestrators_numbers_under_its_names(tmp_path):
-    from lit_boot.bootstrap.evaluate import flow_metrics
+    from lit_boot.metrics import scene_flow_metrics
 
     scene = make_scene(motion="run", frames=3, height=64, width=96, seed=2, pan_deg_per_s=30.0)
     assert scene.gt.flow_occluded.any()  # the occluded pixels must be left out by both
@@ -92,7 +92,7 @@ def test_validation_reports_the_orchestrators_numbers_under_its_names(tmp_path):
     model.raft.eval()
     with torch.no_grad():
         flows = torch.cat([predict_flow(model.raft, scene.frames[i], scene.frames[i + 1], 3) for i in range(2)])
-    expected = flow_metrics(scene, flows)
+    expected = scene_flow_metrics(scene.gt, flows)
     assert set(expected) == {"epe", "epe_person", "epe_background", "epe_joints"}
     for name, value in expected.items():
         assert logged[f"val/{name}"] == pytest.approx(value, rel=1e-4), name

@@ -65,18 +65,18 @@ def test_the_pose_stage_never_imports_the_flow_stage():
 
 
 def test_hparams_hold_every_init_arg_with_the_lambdas_as_a_dict():
-    model = PoseRefiner(lr=0.01, weights={"opt": 0.5}, confidence="real", pixel_scale=6.0, keypoint_joints=["left_wrist"])
+    model = PoseRefiner(lr=0.01, loss_weights={"opt": 0.5}, confidence="real", pixel_scale=6.0, keypoint_joints=["left_wrist"])
     expected = {"lr": 0.01, "keypoint_joints": ["left_wrist"], "confidence": "real", "confidence_threshold": 0.0,
                 "flow_inside_only": True, "pixel_scale": 6.0, "eval_every_n_steps": 100, "save": True,
                 "output_dir": None, "num_threads": 1,
-                "weights": dataclasses.asdict(PoseLossWeights(opt=0.5))}  # fmt: skip
+                "loss_weights": dataclasses.asdict(PoseLossWeights(opt=0.5))}  # fmt: skip
     assert dict(model.hparams) == expected and dict(model.hparams_initial) == expected  # loggers get the lambdas too
-    assert model.weights == PoseLossWeights(opt=0.5) and model.image_size == (1, 1)
-    model2d = KeypointRefiner(weights=KeypointLossWeights(smooth=2.0), confidence="none")
+    assert model.loss_weights == PoseLossWeights(opt=0.5) and model.image_size == (1, 1)
+    model2d = KeypointRefiner(loss_weights=KeypointLossWeights(smooth=2.0), confidence="none")
     assert dict(model2d.hparams) == {"lr": 0.1, "confidence": "none", "confidence_threshold": 0.0,
                                      "flow_inside_only": True, "eval_every_n_steps": 100, "save": True,
                                      "output_dir": None, "num_threads": 1,
-                                     "weights": {"opt": 300.0, "init": 400.0, "smooth": 2.0}}  # fmt: skip
+                                     "loss_weights": {"opt": 300.0, "init": 400.0, "smooth": 2.0}}  # fmt: skip
 
 
 def test_a_subclass_keeps_its_own_init_args_in_hparams():
@@ -86,14 +86,14 @@ def test_a_subclass_keeps_its_own_init_args_in_hparams():
             self.factor = factor
 
     hparams = Scaled(factor=3.0, lr=0.02).hparams
-    assert hparams["factor"] == 3.0 and hparams["lr"] == 0.02 and hparams["weights"]["bone"] == 1e4
+    assert hparams["factor"] == 3.0 and hparams["lr"] == 0.02 and hparams["loss_weights"]["bone"] == 1e4
 
 
 def test_bad_settings_name_the_argument():
-    with pytest.raises(ValueError, match=r"weights: unknown lambda 'init'; expected some of \['opt'"):
-        PoseRefiner(weights={"init": 1.0})
-    with pytest.raises(TypeError, match="weights: expected a KeypointLossWeights"):
-        KeypointRefiner(weights=PoseLossWeights())
+    with pytest.raises(ValueError, match=r"loss_weights: unknown lambda 'init'; expected some of \['opt'"):
+        PoseRefiner(loss_weights={"init": 1.0})
+    with pytest.raises(TypeError, match="loss_weights: expected a KeypointLossWeights"):
+        KeypointRefiner(loss_weights=PoseLossWeights())
     with pytest.raises(ValueError, match="confidence: expected one of"):
         KeypointRefiner(confidence="maybe")
     with pytest.raises(ValueError, match="pixel_scale"):
@@ -133,16 +133,16 @@ def test_3d_mode_needs_3d_joints_and_2d_mode_keypoints(scene):
 def test_validate_evaluates_the_current_poses_without_changing_them(scene):
     model = PoseRefiner(save=False)
     initial = quiet_trainer().validate(model, datamodule=PoseData(scene, "gt"), verbose=False)[0]
-    assert initial["eval/mpjpe_mm"] == pytest.approx(70.0, abs=1e-3)  # the synthetic estimates' MPJPE
-    assert {"eval/pa_mpjpe_mm", "eval/accel_mm_per_frame2", "eval/proj2d_px", "loss/opt", "loss/bone",
+    assert initial["val/mpjpe_mm"] == pytest.approx(70.0, abs=1e-3)  # the synthetic estimates' MPJPE
+    assert {"val/pa_mpjpe_mm", "val/accel_mm_per_frame2", "val/proj2d_px", "loss/opt", "loss/bone",
             "loss/total"} <= set(initial)  # fmt: skip
     torch.testing.assert_close(model.joints.detach(), scene.joints3d / 1000.0)
     make_trainer(40, early_stop=False).fit(model, datamodule=PoseData(scene, "gt"))
-    assert model.result.metrics_before["eval/mpjpe_mm"] == pytest.approx(initial["eval/mpjpe_mm"], rel=1e-5)
+    assert model.result.metrics_before["mpjpe_mm"] == pytest.approx(initial["val/mpjpe_mm"], rel=1e-5)
     refined = model.joints.detach().clone()
     after = quiet_trainer().validate(model, datamodule=PoseData(scene, "gt"), verbose=False)[0]
-    assert after["eval/mpjpe_mm"] == pytest.approx(model.result.metrics_after["eval/mpjpe_mm"], rel=1e-5)
-    assert after["eval/mpjpe_mm"] != pytest.approx(initial["eval/mpjpe_mm"], abs=0.1)  # the poses did move
+    assert after["val/mpjpe_mm"] == pytest.approx(model.result.metrics_after["mpjpe_mm"], rel=1e-5)
+    assert after["val/mpjpe_mm"] != pytest.approx(initial["val/mpjpe_mm"], abs=0.1)  # the poses did move
     assert after["loss/total"] < initial["loss/total"]
     assert torch.equal(model.joints.detach(), refined)
     other = make_scene(motion="walk", frames=4, height=64, width=96, seed=1)  # another scene: rebuilt from it
@@ -155,7 +155,7 @@ def printed_metric(text: str, name: str) -> float:
     return float(line.split()[-1])
 
 
-@pytest.mark.parametrize("config, metric", [("pose_refiner", "eval/mpjpe_mm"), ("pose_refiner_2d", "eval/kp2d_px")])
+@pytest.mark.parametrize("config, metric", [("pose_refiner", "mpjpe_mm"), ("pose_refiner_2d", "kp2d_px")])
 def test_cli_validate_prints_the_initial_estimates_errors(config, metric, scene, scene_dir, tmp_path, capsys):
     argv = ["validate", "--config", f"configs/{config}.yaml", "--data.scene", str(scene_dir), "--data.flows", "gt",
             "--trainer.default_root_dir", str(tmp_path), "--trainer.logger", "false",
@@ -164,9 +164,9 @@ def test_cli_validate_prints_the_initial_estimates_errors(config, metric, scene,
     out = capsys.readouterr().out
     model = PoseRefiner() if config == "pose_refiner" else KeypointRefiner()
     model.prepare(scene, scene.gt.flow)
-    assert printed_metric(out, metric) == pytest.approx(model.evaluate()[metric], rel=1e-5)
+    assert printed_metric(out, f"val/{metric}") == pytest.approx(model.evaluate()[metric], rel=1e-5)
     assert printed_metric(out, "loss/total") == pytest.approx(model.final_loss()["total"], rel=1e-4)
-    assert not list(tmp_path.rglob("poses.json"))  # validation saves nothing
+    assert not list(tmp_path.rglob("pose_report.json"))  # validation saves nothing
 
 
 def test_the_top_level_package_exports_the_flow_bootstrap_and_reader_api():

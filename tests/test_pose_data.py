@@ -108,7 +108,7 @@ def test_cli_fit_runs_and_saves_the_poses(config, flows, scene, scene_dir, tmp_p
     assert result.steps == 30 and result.scene == scene.name
     if config == "pose_refiner":
         assert result.mode == "3d" and result.joints3d.shape == (4, 14, 3)
-        assert result.metrics_after["eval/mpjpe_mm"] > 0
+        assert result.metrics_after["mpjpe_mm"] > 0
     else:
         assert result.mode == "2d" and result.keypoints2d.shape == (4, 17, 2)
 

@@ -86,7 +86,7 @@ def test_a_still_scene_with_perfect_estimates_stays_put(camera, tmp_path):
     assert result.steps == 40
     torch.testing.assert_close(result.joints3d, scene.joints3d, atol=1e-4, rtol=0)
     torch.testing.assert_close(result.cameras.params, scene.cameras.params, atol=1e-6, rtol=1e-6)
-    assert result.metrics_after["eval/mpjpe_mm"] < 1e-3
+    assert result.metrics_after["mpjpe_mm"] < 1e-3
     assert result.loss["total"] == 0.0
 
 
@@ -102,13 +102,13 @@ def test_the_authors_early_stop_ends_a_flat_run(tmp_path):
 def test_jittered_joints_get_closer_to_the_truth_with_exact_flow(jittered, tmp_path):
     result = fit(PoseRefiner(save=False), jittered, steps=300, tmp_path=tmp_path)
     before, after = result.metrics_before, result.metrics_after
-    assert after["eval/mpjpe_mm"] < 0.8 * before["eval/mpjpe_mm"]
-    assert after["eval/accel_mm_per_frame2"] < 0.5 * before["eval/accel_mm_per_frame2"]
+    assert after["mpjpe_mm"] < 0.8 * before["mpjpe_mm"]
+    assert after["accel_mm_per_frame2"] < 0.5 * before["accel_mm_per_frame2"]
     assert result.joints3d.shape == jittered.joints3d.shape and torch.isfinite(result.joints3d).all()
 
 
 def test_terms_switch_off_and_l3d_alone_changes_nothing(jittered):
-    model = PoseRefiner(weights=PoseLossWeights(opt=0, keypoints2d=0, pos=0, cam=0, bone=0), save=False)
+    model = PoseRefiner(loss_weights=PoseLossWeights(opt=0, keypoints2d=0, pos=0, cam=0, bone=0), save=False)
     make_trainer(20, early_stop=False).fit(model, datamodule=PoseData(jittered, flows=None, steps=20))
     assert set(model.final_loss()) == {"3d", "total"}
     torch.testing.assert_close(model.result.joints3d, jittered.joints3d, atol=1e-4, rtol=0)
@@ -139,7 +139,7 @@ def test_2d_mode_improves_keypoints_with_exact_flow(walk, tmp_path):
     model = KeypointRefiner(output_dir=str(tmp_path / "out"))
     result = fit(model, walk, steps=150, tmp_path=tmp_path)
     assert result.mode == "2d" and result.keypoints2d.shape == walk.keypoints2d.shape
-    assert result.metrics_after["eval/kp2d_px"] < 0.85 * result.metrics_before["eval/kp2d_px"]
+    assert result.metrics_after["kp2d_px"] < 0.85 * result.metrics_before["kp2d_px"]
     saved = load_pose_result(tmp_path / "out")
     torch.testing.assert_close(saved.keypoints2d, result.keypoints2d)
 
@@ -149,7 +149,7 @@ def test_result_is_saved_and_applies_to_the_scene(jittered, tmp_path):
     saved = load_pose_result(tmp_path)  # no logger: the run folder is default_root_dir
     torch.testing.assert_close(saved.joints3d, result.joints3d)
     torch.testing.assert_close(saved.cameras.params, result.cameras.params)
-    assert saved.metrics_before == result.metrics_before and saved.settings["weights"]["bone"] == 1e4
+    assert saved.metrics_before == result.metrics_before and saved.settings["loss_weights"]["bone"] == 1e4
     refined = result.apply_to(jittered)
     assert torch.equal(refined.joints3d, result.joints3d) and refined.gt is jittered.gt
 
@@ -162,9 +162,9 @@ def test_losses_are_logged_every_n_steps_and_metrics_at_the_end(jittered, tmp_pa
     trainer.fit(model, datamodule=PoseData(jittered, "gt"))
     logged = trainer.callback_metrics
     assert {"loss/opt", "loss/3d", "loss/2d", "loss/pos", "loss/cam", "loss/bone", "loss/total"} <= set(logged)
-    assert {"eval/mpjpe_mm", "eval/pa_mpjpe_mm", "eval/accel_mm_per_frame2", "eval/proj2d_px"} <= set(logged)
+    assert {"val/mpjpe_mm", "val/pa_mpjpe_mm", "val/accel_mm_per_frame2", "val/proj2d_px"} <= set(logged)
     text = (tmp_path / "lightning_logs" / "version_0" / "metrics.csv").read_text()
-    assert "loss/bone" in text and "eval/mpjpe_mm" in text
+    assert "loss/bone" in text and "val/mpjpe_mm" in text
 
 
 def test_missing_flow_needs_the_flow_term_off(walk):
@@ -184,7 +184,7 @@ def test_module_terms_push_joints_the_expected_way(camera):
     scene.gt.flow[:, 0] = 2.0
     for term, weights in [("2d", PoseLossWeights(opt=0, joints3d=0, pos=0, cam=0, bone=0)),
                           ("opt", PoseLossWeights(keypoints2d=0, joints3d=0, pos=0, cam=0, bone=0))]:  # fmt: skip
-        model = PoseRefiner(weights=weights, save=False)
+        model = PoseRefiner(loss_weights=weights, save=False)
         model.prepare(scene, scene.gt.flow)
         loss, terms = model.total_loss(with_terms=True)
         assert set(terms) == {term}

@@ -47,7 +47,6 @@ def test_pose_file_errors(tmp_path):
     header = {"format": "lit-boot-pose-estimates", "version": 1}
     cases = {
         "other.json": ({"format": "something"}, "not a 'lit-boot-pose-estimates'"),
-        "refiner.json": ({"format": "lit-boot-poses", "mode": "3d"}, "load_pose_result"),
         "future.json": (header | {"version": 2, "frame_indices": [0]}, "unsupported version 2"),
         "noidx.json": (header | {"joints3d": [[[0, 0, 0]] * 14]}, "missing key 'frame_indices'"),
         "shape.json": (header | {"frame_indices": [0], "keypoints2d": [[[0, 0]] * 5], "keypoints_conf": [[1] * 5]},

@@ -28,7 +28,7 @@ import lit_boot
 from lit_boot.bootstrap.report import write_video
 from lit_boot.core.joints import H36M_J17_TO_J14
 from lit_boot.data.readers import PoseEstimates, save_poses
-from lit_boot.flow import write_flows
+from lit_boot.data import write_flows
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

@@ -4,8 +4,8 @@
   :class:`BootstrapResult` (refined scene, flows, poses, metrics per stage);
 - :class:`BootstrapConfig`: its settings, with the ``paper`` and ``default`` presets
   (:data:`PRESETS`);
-- :mod:`~lit_boot.bootstrap.evaluate`: the metrics recorded per stage (EPE, MPJPE, the
-  flow-pose agreement, drift); :mod:`~lit_boot.bootstrap.report`: the plot and overlay video.
+- :mod:`~lit_boot.bootstrap.evaluate`: what is measured per stage without ground truth (the
+  flow-pose agreement, drift, image evidence; the GT metrics are :mod:`lit_boot.metrics.suite`'s); :mod:`~lit_boot.bootstrap.report`: the plot and overlay video.
 
 This is where lit_boot.flow and lit_boot.pose meet.
 """
@@ -16,12 +16,12 @@ from .._lazy import lazy_attributes
 from .config import DRIFT_GUARDS, MODES, PRESETS, BootstrapConfig
 
 if TYPE_CHECKING:
-    from .evaluate import agreement, drift, flow_metrics, pose_metrics, pose_points
+    from .evaluate import agreement, drift
     from .result import BootstrapResult
     from .runner import Bootstrap, bootstrap
 
 #: Names imported on first use: the runner pulls Lightning, and the CLI's help needs only the config.
-_LAZY = {**dict.fromkeys(["agreement", "drift", "flow_metrics", "pose_metrics", "pose_points"], ".evaluate"),
+_LAZY = {**dict.fromkeys(["agreement", "drift"], ".evaluate"),
          **dict.fromkeys(["Bootstrap", "bootstrap"], ".runner"), "BootstrapResult": ".result"}
 
 
@@ -37,7 +37,4 @@ __all__ = [
     "DRIFT_GUARDS",
     "agreement",
     "drift",
-    "flow_metrics",
-    "pose_metrics",
-    "pose_points",
 ]

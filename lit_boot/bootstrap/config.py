@@ -24,7 +24,7 @@ from typing import Any
 
 __all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "BootstrapConfig"]
 
-MODES = ("3d", "2d")
+MODES = ("3d", "2d")  # lit_boot.core.POSE_MODES, literal here: the CLI reads this module without torch
 DRIFT_GUARDS = ("record", "stop", "rollback")
 #: The flow stages' self-check against the frames (see :mod:`lit_boot.bootstrap.selfcheck`).
 SELF_CHECKS = ("off", "photometric")
@@ -85,7 +85,7 @@ class BootstrapConfig:
         cycles: pose cycles; the run is flow, (pose, flow) x cycles: the paper's 1 gives
             flow -> pose -> flow.
         flow: FlowTTT arguments over the preset's (arch, weights, lr, sketch, crop_margin, ...).
-        pose: PoseRefiner / KeypointRefiner arguments over the preset's (lr, weights, ...).
+        pose: PoseRefiner / KeypointRefiner arguments over the preset's (lr, loss_weights, ...).
         flow_epochs: epochs per flow stage; None: 8 in 3D mode, 50 in 2D mode (the paper).
         pose_steps: Adam steps per pose stage (the paper: 1500).
         early_stop: the authors' early stop of the pose stage (loss unchanged to 4 decimals for
@@ -94,7 +94,7 @@ class BootstrapConfig:
             authors, it continues from the previous flow stage's).
         flow_ensemble: extra FlowTTT argument dicts (e.g. [{"arch": "raft_large", "weights":
             "C_T_V1"}]): each network is fine-tuned alike and the flows are averaged (Table 2).
-        pose_ensemble: extra refined-pose folders (poses.npz + poses.json, e.g. another
+        pose_ensemble: extra refined-pose folders (poses.npz + pose_report.json, e.g. another
             estimator's joints in the same layout) averaged with the scene's estimates first.
         accelerator: for the flow stages (auto: CUDA when available).
         pose_accelerator: for the pose stages (a few thousand numbers: the CPU is faster).

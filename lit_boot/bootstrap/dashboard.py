@@ -10,7 +10,6 @@ from lightning.pytorch.loggers import TensorBoardLogger
 from ..core import Scene
 from ..data import draw_skeleton, flow_image
 from .decisions import decision_image
-from .evaluate import pose_points
 
 __all__ = ["stage_header", "log_stage_images"]
 
@@ -31,8 +30,8 @@ def log_stage_images(
     if not tensorboards:
         return
     t = (scene.num_frames - 1) // 2
-    points, keep = pose_points(scene, mode)
-    layout = scene.joints3d_layout if mode == "3d" else scene.keypoints_layout
+    points, keep = scene.pose_points(mode)
+    layout = scene.pose_layout(mode)
     skeleton = draw_skeleton(scene.frames[t], points[t], layout, confidence=keep[t].float(), threshold=0.5)
     for logger in tensorboards:
         logger.experiment.add_image(f"flow/{stage}", flow_image(flows[t].float()), step)

@@ -1,10 +1,8 @@
 """What the orchestrator measures after every stage.
 
-- Flow against the scene's GT flow (when it has one): EPE over all valid, non-occluded pixels,
-  on the person, on the background, and at the GT joints (the authors' convention: GT joint
-  displacement vs the flow at the rounded pixel).
-- Poses against the GT poses (when it has them): MPJPE / PA-MPJPE (mm) and acceleration
-  error (mm/frame^2) in 3D mode, 2D keypoint error (px) in 2D-only mode.
+- Against ground truth, when the scene has it: the flow and pose metrics of
+  :mod:`lit_boot.metrics.suite` (``epe``, ``epe_person``, ... ``mpjpe_mm``, ``kp2d_px``), the same
+  names and conventions as FlowTTT's and the refiners' validation.
 - Flow-pose agreement, which needs no ground truth: the L_opt residual of the current poses
   under the current flow, i.e. the mean distance (px) between the flow sampled bilinearly at
   each pose joint in frame t and that joint's displacement to frame t+1, over confident joints
@@ -24,26 +22,11 @@ from __future__ import annotations
 
 import torch
 
-from ..core import Scene, get_layout, inside_image
+from ..core import inside_image
 from ..flow.evidence import photometric_error, track_error
-from ..metrics import acceleration_error, epe_at_points, flow_errors, mpjpe, pa_mpjpe
+from ..metrics import epe_at_points, flow_errors
 
-__all__ = ["pose_points", "flow_metrics", "pose_metrics", "agreement", "drift", "photo_error", "pose_track_error"]
-
-
-def pose_points(scene: Scene, mode: str, threshold: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
-    """The pose as image points: (T, K, 2) px and a (T, K) bool of joints that count.
-
-    3D mode: the joints projected by the cameras (every joint counts); 2D mode: the keypoints,
-    counting those with confidence above ``threshold``.
-    """
-    if mode == "3d":
-        points = scene.cameras.project(scene.joints3d.float())
-        return points, torch.ones(points.shape[:2], dtype=torch.bool)
-    points = scene.keypoints2d.float()
-    conf = scene.keypoints_conf
-    keep = conf > threshold if conf is not None else torch.ones(points.shape[:2], dtype=torch.bool)
-    return points, keep
+__all__ = ["agreement", "drift", "photo_error", "pose_track_error"]
 
 
 @torch.no_grad()
@@ -62,62 +45,9 @@ def agreement(flows: torch.Tensor, points: torch.Tensor, keep: torch.Tensor) -> 
 
 
 @torch.no_grad()
-def flow_metrics(scene: Scene, flows: torch.Tensor) -> dict[str, float]:
-    """EPE all / person / background / at GT joints (px) of ``flows`` (T-1, 2, H, W) against
-    the scene's GT flow; {} without one."""
-    gt = scene.gt
-    if gt is None or gt.flow is None:
-        return {}
-    flows = flows.float()
-    valid = gt.flow_mask()
-    out = {"epe": float(flow_errors(flows, gt.flow.float(), valid)["epe"])}
-    if gt.person_mask is not None:
-        person = gt.person_mask[:-1]
-        out["epe_person"] = float(flow_errors(flows, gt.flow.float(), valid & person)["epe"])
-        out["epe_background"] = float(flow_errors(flows, gt.flow.float(), valid & ~person)["epe"])
-    if gt.joints2d is not None:
-        j = gt.joints2d.float()
-        H, W = flows.shape[-2:]
-        visible = inside_image(j[:-1], H, W)
-        err = epe_at_points(flows, j[:-1], j[1:] - j[:-1], visible, mode="nearest")
-        out["epe_joints"] = float(err.sum() / visible.sum()) if visible.any() else float("nan")
-    return out
-
-
-@torch.no_grad()
-def pose_metrics(scene: Scene, mode: str) -> dict[str, float]:
-    """The scene's current estimates against its GT: mpjpe_mm, pa_mpjpe_mm,
-    accel_mm_per_frame2 (3D mode, GT joints in the same layout) or kp2d_px (2D mode); {}
-    without ground truth."""
-    gt = scene.gt
-    if gt is None:
-        return {}
-    if mode == "3d":
-        if gt.joints3d is None or scene.joints3d is None or get_layout(gt.joints_layout) != get_layout(scene.joints3d_layout):
-            return {}
-        layout = get_layout(scene.joints3d_layout)
-        root = layout.root or (0,)
-        pred, target = scene.joints3d.float(), gt.joints3d.float()
-        out = {
-            "mpjpe_mm": float(mpjpe(pred, target, root=root).mean()),
-            "pa_mpjpe_mm": float(pa_mpjpe(pred, target)),
-        }
-        if pred.shape[0] >= 3:
-            out["accel_mm_per_frame2"] = float(acceleration_error(pred, target, root=root).mean())
-        return out
-    if gt.keypoints2d is None or scene.keypoints2d is None:
-        return {}
-    return {"kp2d_px": float((scene.keypoints2d.float() - gt.keypoints2d.float()).norm(dim=-1).mean())}
-
-
-@torch.no_grad()
 def drift(flows: torch.Tensor, initial: torch.Tensor, person: torch.Tensor) -> float:
     """Mean |flows - initial| px over the pixels outside ``person`` (T-1, H, W) bool."""
-    outside = ~person
-    n = outside.sum()
-    if not n:
-        return float("nan")
-    return float((flows.float() - initial.float()).norm(dim=1)[outside].sum() / n)
+    return float(flow_errors(flows.float(), initial.float(), ~person)["epe"])
 
 
 @torch.no_grad()

@@ -9,9 +9,8 @@ from typing import Any
 import torch
 
 from ..data.atomic import atomic_write_bytes
-from ..flow import write_flows, write_flows_npz
+from ..data.flows import write_flows, write_flows_npz
 from .config import BootstrapConfig
-from .evaluate import pose_points
 from .decisions import decision_summary
 from .report import overlay_frames, plot_history, video_fps, write_video
 from .result import BootstrapResult
@@ -67,9 +66,9 @@ def write_overlay_video(result: BootstrapResult, mode: str) -> None:
     """overlay.mp4: the mosaics of :func:`overlay_frames` (with the GT flow and the EPE change
     when the scene has GT flow, over pixels valid and not occluded, as the EPE metrics) at
     :func:`video_fps` (2 fps for up to 10 mosaics, else as fast as lasts 5 s, at most the scene's fps)."""
-    before, keep0 = pose_points(result.initial_scene, mode)
-    after, keep1 = pose_points(result.scene, mode)
-    layout = result.scene.joints3d_layout if mode == "3d" else result.scene.keypoints_layout
+    before, keep0 = result.initial_scene.pose_points(mode)
+    after, keep1 = result.scene.pose_points(mode)
+    layout = result.scene.pose_layout(mode)
     nan = float("nan")
     before = torch.where(keep0[..., None], before, nan)
     after = torch.where(keep1[..., None], after, nan)

@@ -6,6 +6,7 @@ frame t to frame t+1; keypoints are (x, y) pixels with pixel centres at integer 
 
 from __future__ import annotations
 
+import functools
 import math
 
 import cv2
@@ -188,20 +189,13 @@ def overlay_frames(
     cols = 2 if gt_flow is None else 3
     scale = min(1.0, max_side / max(2 * H, cols * W))
     h, w = max(1, int(H * scale)), max(1, int(W * scale))
-
-    def resize(image: torch.Tensor | np.ndarray) -> np.ndarray:  # (3, H, W) or HWC -> HWC (h, w, 3)
-        array = image.permute(1, 2, 0).numpy() if isinstance(image, torch.Tensor) else image
-        return array if (h, w) == (H, W) else cv2.resize(array, (w, h), interpolation=cv2.INTER_AREA)
-
-    def clean(flow: torch.Tensor) -> torch.Tensor:
-        return torch.nan_to_num(flow.detach().cpu().float(), 0.0, 0.0, 0.0)
-
-    flows = {"before": clean(flow_before), "after": clean(flow_after)}
+    resize = functools.partial(_resize, size=(h, w))
+    flows = {"before": _clean(flow_before), "after": _clean(flow_after)}
     valid = torch.ones(T - 1, H, W, dtype=torch.bool) if gt_valid is None else gt_valid.detach().cpu()
     magnitudes = [flows["before"].norm(dim=1).numpy(), flows["after"].norm(dim=1).numpy()]
     errors, error_scale, labels = None, None, list(flow_labels)
     if gt_flow is not None:
-        gt = clean(gt_flow)
+        gt = _clean(gt_flow)
         magnitudes.append(gt.norm(dim=1)[valid].numpy())
         epe, errors, error_scale = _epe_change(flows, gt, valid)
     flow_scale = flow_colour_scale(magnitudes)
@@ -229,6 +223,18 @@ def overlay_frames(
         rows = [np.concatenate(top, 1), np.concatenate(bottom, 1)] + ([key] if key is not None else [])
         mosaics.append(torch.from_numpy(np.concatenate(rows, 0)).permute(2, 0, 1))
     return torch.stack(mosaics).contiguous()
+
+
+def _resize(image: torch.Tensor | np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """(3, H, W) tensor or (H, W, 3) array -> (h, w, 3) array (INTER_AREA; as is when the size agrees)."""
+    array = image.permute(1, 2, 0).numpy() if isinstance(image, torch.Tensor) else image
+    h, w = size
+    return array if array.shape[:2] == (h, w) else cv2.resize(array, (w, h), interpolation=cv2.INTER_AREA)
+
+
+def _clean(flow: torch.Tensor) -> torch.Tensor:
+    """The flow as a float CPU tensor with NaN and inf set to 0."""
+    return torch.nan_to_num(flow.detach().cpu().float(), 0.0, 0.0, 0.0)
 
 
 def _epe_change(flows: dict, gt: torch.Tensor, valid: torch.Tensor) -> tuple[dict, torch.Tensor, float]:

@@ -10,7 +10,7 @@ A run folder (the input scene folder is never written)::
                            stage.json, written last: a stage with stage.json is done, and a
                            rerun of an interrupted run loads it instead of running it again
     flows/                 the final flows (flow_<t>.flo or flows.npz) and colour PNGs
-    poses.npz, poses.json  the final refined poses (see lit_boot.pose.PoseResult)
+    poses.npz, pose_report.json  the final refined poses (a lit-boot pose file) and their report
     raft_finetuned.pt      the final fine-tuned RAFT weights (torchvision format)
     summary.json           settings, device, every metric per stage, timings, guard events
     metrics.png            the metrics per stage
@@ -24,12 +24,13 @@ gradient or weight (:class:`~lit_boot.finite.FiniteGuard`), or whose output is n
 rolled back: its output is discarded, the previous stage's flows, poses and weights are kept
 (the final outputs are theirs), the stage's record in summary.json says ``rolled_back`` with a
 ``guard`` event ``{"guard": "finite", "what": ..., "step": ...}``, and the run stops, as the
-drift guard's ``rollback`` does (a rerun reprints it; ``overwrite`` tries again).
+drift guard's ``rollback`` does (a rerun logs it again; ``overwrite`` tries again).
 """
 
 from __future__ import annotations
 
 import io
+import logging
 import os
 import time
 from dataclasses import dataclass, field
@@ -46,33 +47,32 @@ from ..core import Scene
 from ..data import load_scene
 from ..data.atomic import atomic_write_bytes
 from ..finite import NonFiniteError
-from ..flow import FlowTTT, write_flows_npz
-from ..pose import PoseResult, load_pose_result
+from ..data.flows import read_flows, write_flows_npz
+from ..flow import FlowTTT
+from ..metrics import scene_flow_metrics, scene_pose_metrics
+from ..pose import REFINERS, PoseResult, load_pose_result
 from .config import BootstrapConfig
 from .dashboard import log_stage_images, stage_header
 from .decisions import decision_summary, load_decisions, save_decisions, target_line
 from .ensemble import average_poses
-from .evaluate import agreement, drift, flow_metrics, photo_error, pose_metrics, pose_points, pose_track_error
+from .evaluate import agreement, drift, photo_error, pose_track_error
 from .folder import STAGE_JSON, RunFolder
 from .guard import drift_guard, guard_text
 from .lock import RunLock
 from .outputs import write_outputs
 from .result import BootstrapResult
 from .selfcheck import check_stage, summary_line
-from .stages import fine_tune_flow, make_flow_model, make_refiner, predict_flows, refine_poses_stage
+from .stages import fine_tune_flow, make_flow_model, predict_flows, quiet_refiner, refine_poses_stage
 
 __all__ = ["Bootstrap", "BootstrapResult", "bootstrap", "STAGE_JSON"]
+
+log = logging.getLogger(__name__)
 
 
 def _save_tensor(path: Path, state: dict[str, torch.Tensor]) -> None:
     buffer = io.BytesIO()
     torch.save(state, buffer)
     atomic_write_bytes(path, buffer.getvalue())
-
-
-def _load_flows(path: Path) -> torch.Tensor:
-    with np.load(path) as data:
-        return torch.from_numpy(np.array(data["flow"]))
 
 
 @dataclass
@@ -140,10 +140,7 @@ class Bootstrap:
         scene = self.scene if self.scene is not None else load_scene(self.scene_arg)
         if scene.num_frames < 2:
             raise ValueError(f"scene {scene.name!r}: needs at least 2 frames, has {scene.num_frames}")
-        if cfg.mode == "3d" and (scene.joints3d is None or scene.cameras is None):
-            raise ValueError(f"scene {scene.name!r}: 3D mode needs 3D joints with cameras (use mode '2d')")
-        if cfg.mode == "2d" and scene.keypoints2d is None:
-            raise ValueError(f"scene {scene.name!r}: 2D mode needs 2D keypoints")
+        scene.require_pose(cfg.mode)
         return average_poses(scene, cfg.pose_ensemble, cfg.mode)
 
     def _build(self, person_px: float) -> None:
@@ -155,7 +152,7 @@ class Bootstrap:
         for m, model in enumerate(self.models):
             if not all(torch.isfinite(t).all() for t in model.raft.state_dict().values() if t.is_floating_point()):
                 raise ValueError(f"RAFT weights {cfg.flow_kwargs(m).get('weights')}: hold NaN or infinite values")
-        make_refiner(cfg.mode, cfg.pose_kwargs())
+        quiet_refiner(cfg.mode, cfg.pose_kwargs())
 
     # --- logging and devices -------------------------------------------------------------------------
     def _loggers(self, version: str) -> list:
@@ -195,7 +192,7 @@ class Bootstrap:
         (:mod:`~lit_boot.bootstrap.decisions`)."""
         cfg, n = self.config, len(self.models)
         what = f"FlowTTT x{n}, {cfg.epochs} epochs, {st.precision} on {st.accelerator}"
-        print(stage_header(index, len(cfg.stages()), name, what), flush=True)
+        log.info(stage_header(index, len(cfg.stages()), name, what))
         flows, reports = [], []
         for m in range(n):
             model = self._model(m, st.person_px, fresh=cfg.restart_flow)
@@ -206,28 +203,27 @@ class Bootstrap:
         mean = torch.stack(flows).mean(0)
         person = self.models[0].person_region(self.models[0].sketch_masks)
         mean, check, kept = check_stage(cfg, st.scene, st.initial, mean, person)
-        record = {**flow_metrics(st.scene, mean), "drift_px": drift(mean, st.initial, person),
-                  "agreement_px": agreement(mean, *pose_points(st.scene, cfg.mode)),
+        record = {**scene_flow_metrics(st.scene.gt, mean), "drift_px": drift(mean, st.initial, person),
+                  "agreement_px": agreement(mean, *st.scene.pose_points(cfg.mode)),
                   "photo_error": photo_error(st.scene.frames, mean),
                   "info": {"target": reports[0], "sketch": self.models[0].hparams["sketch"]}}  # fmt: skip
-        print(target_line(reports[0]), flush=True)
+        log.info(target_line(reports[0]))
         if check is not None:
             record["info"]["self_check"] = check
-            print(summary_line(check), flush=True)
+            log.info(summary_line(check))
         kept = kept if kept is not None else torch.ones(mean.shape[0], *mean.shape[-2:])
         return record, mean, {"painted": self.models[0].sketch_masks.cpu(), "kept": kept}
 
     def _pose_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], PoseResult]:
         """Refine the current poses against the current flows; the record and the result."""
         cfg = self.config
-        refiner = "PoseRefiner" if cfg.mode == "3d" else "KeypointRefiner"
-        what = f"{refiner}, {cfg.pose_steps} steps on {cfg.pose_accelerator}"
-        print(stage_header(index, len(cfg.stages()), name, what), flush=True)
+        what = f"{REFINERS[cfg.mode].__name__}, {cfg.pose_steps} steps on {cfg.pose_accelerator}"
+        log.info(stage_header(index, len(cfg.stages()), name, what))
         result = refine_poses_stage(st.scene, st.flows, cfg.mode, cfg.pose_kwargs(), cfg.pose_steps, cfg.early_stop,
                                     cfg.pose_accelerator, self._loggers(name), cfg.progress_bar)  # fmt: skip
         refined = result.apply_to(st.scene)
-        points = pose_points(refined, cfg.mode)
-        record = {**pose_metrics(refined, cfg.mode), "agreement_px": agreement(st.flows, *points),
+        points = refined.pose_points(cfg.mode)
+        record = {**scene_pose_metrics(refined, cfg.mode), "agreement_px": agreement(st.flows, *points),
                   "track_error": pose_track_error(refined.frames, *points),
                   "info": {"steps": result.steps, "stopped_early": result.stopped_early,
                            "loss": result.loss}}  # fmt: skip
@@ -239,10 +235,10 @@ class Bootstrap:
         cfg, folder = self.config, self.folder.stage_dir("initial")
         record = self.folder.record("initial")
         if record is not None:
-            st.initial = _load_flows(folder / "flows.npz")
+            st.initial = read_flows(folder / "flows.npz")
         else:
             n = len(self.models)
-            print(stage_header(0, len(cfg.stages()), "initial", f"RAFT inference x{n} on {st.accelerator}"), flush=True)
+            log.info(stage_header(0, len(cfg.stages()), "initial", f"RAFT inference x{n} on {st.accelerator}"))
             start = time.perf_counter()
             try:
                 flows = [predict_flows(self._model(m, st.person_px), st.scene, st.accelerator, st.precision)
@@ -251,9 +247,9 @@ class Bootstrap:
                 raise NonFiniteError(f"{self.out}: pretrained RAFT's flow is not finite at precision {st.precision} "
                                      "(try precision 32-true)", err.fault) from None  # fmt: skip
             st.initial = torch.stack(flows).mean(0)
-            points = pose_points(st.scene, cfg.mode)
-            record = {"stage": "initial", "kind": "initial", "cycle": 0, **flow_metrics(st.scene, st.initial),
-                      **pose_metrics(st.scene, cfg.mode),
+            points = st.scene.pose_points(cfg.mode)
+            record = {"stage": "initial", "kind": "initial", "cycle": 0, **scene_flow_metrics(st.scene.gt, st.initial),
+                      **scene_pose_metrics(st.scene, cfg.mode),
                       "agreement_px": agreement(st.initial, *points), "photo_error": photo_error(st.scene.frames, st.initial),
                       "track_error": pose_track_error(st.scene.frames, *points),
                       "info": {"seconds": time.perf_counter() - start, "person_px": st.person_px}}  # fmt: skip
@@ -272,7 +268,7 @@ class Bootstrap:
             return False
         folder = self.folder.stage_dir(name)
         if record["kind"] == "flow":
-            st.flows = _load_flows(folder / "flows.npz")
+            st.flows = read_flows(folder / "flows.npz")
             st.decisions = load_decisions(folder / "decisions.npz") if (folder / "decisions.npz").is_file() else None
             self.pending_weights = [folder / f"raft_{m}.pt" for m in range(len(self.models))]
         else:
@@ -307,7 +303,7 @@ class Bootstrap:
                 record["rolled_back"] = True
                 self.folder.write_record(name, record)
                 st.history.append(record)
-                print(f"  drift guard: {guard_text(guard)}; {name} rolled back, run stopped", flush=True)
+                log.warning(f"  drift guard: {guard_text(guard)}; {name} rolled back, run stopped")
                 return False
         self._save_stage(name, kind, flows, result, decisions)
         self.folder.write_record(name, record)
@@ -316,7 +312,7 @@ class Bootstrap:
         st.seconds[name] = record["info"]["seconds"]
         log_stage_images(st.loggers, index, name, st.scene, st.flows, cfg.mode, st.decisions)
         if guard is not None:
-            print(f"  drift guard: {guard_text(guard)}; run stopped", flush=True)
+            log.warning(f"  drift guard: {guard_text(guard)}; run stopped")
             return False
         return True
 
@@ -327,7 +323,7 @@ class Bootstrap:
                   "info": {"seconds": time.perf_counter() - start, "error": str(err)}}  # fmt: skip
         self.folder.write_record(head["stage"], record)
         st.history.append(record)
-        print(f"  finite guard: {err}; {head['stage']} rolled back (its output discarded), run stopped", flush=True)
+        log.warning(f"  finite guard: {err}; {head['stage']} rolled back (its output discarded), run stopped")
         return False
 
     def _save_stage(self, name: str, kind: str, flows: torch.Tensor, result: PoseResult | None, decisions) -> None:
@@ -349,7 +345,7 @@ class Bootstrap:
         self.folder.check(self._settings())  # nothing is written before inputs and settings are known good
         scene = self._inputs()
         L.seed_everything(cfg.seed, verbose=False)
-        person_px = _person_height(*pose_points(scene, cfg.mode))
+        person_px = _person_height(*scene.pose_points(cfg.mode))
         self._build(person_px)
         with RunLock(self.out):
             self.folder.prepare(self._settings())

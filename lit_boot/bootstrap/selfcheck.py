@@ -208,12 +208,12 @@ def check_stage(
     the tuned flow's weight map (T-1, H, W)."""
     if config.checking == "off":
         return tuned, None, None
-    from .evaluate import flow_metrics
+    from ..metrics import scene_flow_metrics
 
     flows, record, weight = self_check(scene.frames, initial, tuned, person, config.self_check_margin,
                                        config.self_check_tile, config.self_check_blend,
                                        config.self_check_window, config.self_check_z)  # fmt: skip
-    return flows, {**record, "tuned_metrics": flow_metrics(scene, tuned)}, weight
+    return flows, {**record, "tuned_metrics": scene_flow_metrics(scene.gt, tuned)}, weight
 
 
 def summary_line(record: dict) -> str:

@@ -18,20 +18,17 @@ from typing import Any
 
 import lightning as L
 import torch
+from lightning.pytorch.callbacks import TQDMProgressBar
 
 from ..core import Scene
 from ..finite import NonFiniteError, finite_fault
 from ..flow import FlowTTT, SceneFlowData, SketchConfig
+from ..flow.data import SOURCE_OF_MODE
 from ..pose import KeypointRefiner, PoseData, PoseRefiner, PoseResult
-from ..pose.api import make_trainer
+from ..pose.api import make_refiner, make_trainer
 
-__all__ = ["make_flow_model", "predict_flows", "fine_tune_flow", "refine_poses_stage", "pose_source", "require_finite",
-           "make_refiner"]
-
-
-def pose_source(mode: str) -> str:
-    """Where the stick-man comes from in ``mode``: projected 3D joints or 2D keypoints."""
-    return "joints3d" if mode == "3d" else "keypoints2d"
+__all__ = ["make_flow_model", "predict_flows", "fine_tune_flow", "refine_poses_stage", "require_finite",
+           "quiet_refiner"]
 
 
 def make_flow_model(kwargs: dict[str, Any]) -> FlowTTT:
@@ -42,10 +39,9 @@ def make_flow_model(kwargs: dict[str, Any]) -> FlowTTT:
     return FlowTTT(**kwargs)
 
 
-def make_refiner(mode: str, kwargs: dict[str, Any]) -> PoseRefiner | KeypointRefiner:
-    """The refiner of ``mode`` (3d: PoseRefiner, 2d: KeypointRefiner) that saves nothing itself."""
-    kwargs = {**kwargs, "save": False}
-    return PoseRefiner(**kwargs) if mode == "3d" else KeypointRefiner(**kwargs)
+def quiet_refiner(mode: str, kwargs: dict[str, Any]) -> PoseRefiner | KeypointRefiner:
+    """The refiner of ``mode`` that saves nothing itself (the runner saves the stage)."""
+    return make_refiner(mode, **{**kwargs, "save": False})
 
 
 def require_finite(what: str, *tensors: torch.Tensor | None) -> None:
@@ -61,11 +57,16 @@ def _raise_fault(trainer: L.Trainer, stage: str) -> None:
         raise NonFiniteError(f"{stage}: non-finite {fault['what']} at step {fault['step']}", fault)
 
 
+def _bars(progress_bar: bool) -> list:
+    """Lightning's plain (tqdm) progress bar when asked: the same bars whatever else is installed."""
+    return [TQDMProgressBar()] if progress_bar else []
+
+
 def _flow_trainer(max_epochs: int, accelerator: str, precision: str, loggers: list, progress_bar: bool) -> L.Trainer:
     return L.Trainer(
         max_epochs=max_epochs, accelerator=accelerator, devices=1, precision=precision, logger=loggers or False,
         enable_checkpointing=False, enable_model_summary=False, num_sanity_val_steps=0, limit_val_batches=0,
-        enable_progress_bar=progress_bar, log_every_n_steps=1,
+        enable_progress_bar=progress_bar, log_every_n_steps=1, callbacks=_bars(progress_bar),
     )  # fmt: skip
 
 
@@ -94,8 +95,8 @@ def fine_tune_flow(
     """Fine-tune ``model`` in place on the stick-man from ``scene``'s current poses; returns
     FlowTTT's target report (bones rejected by the guard, painted fraction, ...). A
     non-finite value raises NonFiniteError (the model holds the last good step's weights)."""
-    model.targets = model.sketch_masks = model.original = None  # rebuilt from these poses
-    data = SceneFlowData(scene, pose_source=pose_source(mode))
+    model.forget_targets()  # rebuilt from these poses
+    data = SceneFlowData(scene, pose_source=SOURCE_OF_MODE[mode])
     trainer = _flow_trainer(epochs, accelerator, precision, loggers, progress_bar)
     trainer.fit(model, datamodule=data)
     _raise_fault(trainer, "FlowTTT")
@@ -115,10 +116,10 @@ def refine_poses_stage(
 ) -> PoseResult:
     """Refine ``scene``'s poses against ``flows`` (T-1, 2, H, W) px; returns the result. A
     non-finite value raises NonFiniteError."""
-    refiner = make_refiner(mode, kwargs)
+    refiner = quiet_refiner(mode, kwargs)
     trainer = make_trainer(
         steps, early_stop, logger=loggers or False, accelerator=accelerator, enable_progress_bar=progress_bar,
-        log_every_n_steps=min(50, steps),
+        log_every_n_steps=min(50, steps), callbacks=_bars(progress_bar),
     )  # fmt: skip
     trainer.fit(refiner, datamodule=PoseData(scene, flows, steps=steps))
     _raise_fault(trainer, type(refiner).__name__)

@@ -12,7 +12,7 @@ from .cameras import (
     project_weak_perspective,
 )
 from .joints import COCO17, H36M17, LAYOUTS, LSP14, MEDIAPIPE33, JointLayout, get_layout, map_joints, mapping_matrix
-from .scene import GroundTruth, Scene, SceneValidationError
+from .scene import POSE_MODES, GroundTruth, Scene, SceneValidationError
 
 __all__ = [
     "CAMERA_MODELS",
@@ -31,6 +31,7 @@ __all__ = [
     "map_joints",
     "mapping_matrix",
     "GroundTruth",
+    "POSE_MODES",
     "Scene",
     "SceneValidationError",
 ]

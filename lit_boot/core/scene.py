@@ -18,7 +18,10 @@ import torch
 from .cameras import Cameras
 from .joints import get_layout
 
-__all__ = ["Scene", "GroundTruth", "SceneValidationError", "check_estimates"]
+__all__ = ["Scene", "GroundTruth", "SceneValidationError", "check_estimates", "POSE_MODES"]
+
+#: The method's two modes: "3d" works from 3D joints with cameras, "2d" from 2D keypoints alone.
+POSE_MODES = ("3d", "2d")
 
 
 class SceneValidationError(ValueError):
@@ -179,6 +182,35 @@ class Scene:
             if not isinstance(self.gt, GroundTruth):
                 raise SceneValidationError(f"Scene.gt: expected a GroundTruth, got {type(self.gt).__name__}")
             self.gt.validate(T, H, W, self.keypoints_layout)
+
+    # --- the pose in the method's two modes (the one place the 3D/2D switch is made) --------------
+    def require_pose(self, mode: str) -> None:
+        """Raise ValueError (naming the scene) unless it has the pose ``mode`` works from: "3d",
+        3D joints with cameras; "2d", 2D keypoints."""
+        if mode not in POSE_MODES:
+            raise ValueError(f"mode: expected one of {POSE_MODES}, got {mode!r}")
+        if mode == "3d" and (self.joints3d is None or self.cameras is None):
+            raise ValueError(f"scene {self.name!r}: 3D mode needs 3D joints with cameras (use mode '2d')")
+        if mode == "2d" and self.keypoints2d is None:
+            raise ValueError(f"scene {self.name!r}: 2D mode needs 2D keypoints")
+
+    def pose_points(self, mode: str, threshold: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
+        """The pose as image points in ``mode``: (T, K, 2) px float and a (T, K) bool of the
+        points that count. "3d": the 3D joints projected by the cameras (every joint counts);
+        "2d": the keypoints (those with confidence above ``threshold`` count)."""
+        self.require_pose(mode)
+        if mode == "3d":
+            points = self.cameras.project(self.joints3d.float())
+            return points, torch.ones(points.shape[:2], dtype=torch.bool)
+        conf = self.keypoints_conf
+        keep = conf > threshold if conf is not None else torch.ones(self.keypoints2d.shape[:2], dtype=torch.bool)
+        return self.keypoints2d.float(), keep
+
+    def pose_layout(self, mode: str) -> str:
+        """The joint layout of the pose ``mode`` works from (3D joints' or keypoints')."""
+        if mode not in POSE_MODES:
+            raise ValueError(f"mode: expected one of {POSE_MODES}, got {mode!r}")
+        return self.joints3d_layout if mode == "3d" else self.keypoints_layout
 
     def summary(self) -> str:
         """A few human-readable lines describing the scene."""

@@ -18,7 +18,7 @@ from .module import FlowTTT
 from .raft import load_raft, pad_to_multiple, predict_flow, prepare_pair
 from .sketch import FOOTPRINTS, GATE_LEVELS, GATES, SketchConfig, SketchResult, footprint_offsets, sketch_flow, sketch_from_layout, target_flow
 from .weights import checkpoint_dirs, convert_original_state_dict, load_state_dict_file, resolve_weights
-from .writer import FlowWriter, write_flows, write_flows_npz
+from .writer import FlowWriter
 
 __all__ = [
     "POSE_SOURCES",
@@ -56,6 +56,4 @@ __all__ = [
     "load_state_dict_file",
     "resolve_weights",
     "FlowWriter",
-    "write_flows",
-    "write_flows_npz",
 ]

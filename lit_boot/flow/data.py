@@ -18,11 +18,14 @@ from torch.utils.data import DataLoader, Dataset
 from ..core import Scene, get_layout
 from ..data import load_scene
 
-__all__ = ["POSE_SOURCES", "SketchInputs", "ScenePairs", "SceneFlowData"]
+__all__ = ["POSE_SOURCES", "MODE_OF_SOURCE", "SketchInputs", "ScenePairs", "SceneFlowData"]
 
 #: Where the stick-man comes from: projected 3D joints (3D mode), 2D keypoints (2D-only mode),
 #: or the ground-truth 2D joints (an oracle, for benchmarks).
 POSE_SOURCES = ("auto", "joints3d", "keypoints2d", "gt")
+#: The method's mode (:data:`lit_boot.core.POSE_MODES`) whose pose each estimate source is.
+MODE_OF_SOURCE = {"joints3d": "3d", "keypoints2d": "2d"}
+SOURCE_OF_MODE = {mode: source for source, mode in MODE_OF_SOURCE.items()}
 
 
 @dataclass
@@ -38,28 +41,26 @@ class SketchInputs:
     depths: torch.Tensor | None
 
 
-def sketch_inputs(scene: Scene, source: str = "auto", poses: torch.Tensor | None = None) -> SketchInputs:
-    """The joints to draw for every pair of ``scene``.
-
-    ``auto`` uses projected 3D joints when the scene has joints and cameras, else 2D keypoints.
-    ``poses`` replaces the scene's own pose source (e.g. refined joints (T, J, 3) in 3D mode,
-    refined keypoints (T, K, 2) in 2D mode).
-    """
+def sketch_inputs(scene: Scene, source: str = "auto") -> SketchInputs:
+    """The joints to draw for every pair of ``scene``: the pose of a mode
+    (:meth:`Scene.pose_points`) or the GT 2D joints. ``auto`` uses projected 3D joints when the
+    scene has joints and cameras, else 2D keypoints."""
     if source not in POSE_SOURCES:
         raise ValueError(f"pose_source: expected one of {POSE_SOURCES}, got {source!r}")
     if source == "auto":
         source = "joints3d" if scene.joints3d is not None and scene.cameras is not None else "keypoints2d"
     conf = depths = None
-    if source == "joints3d":
-        if scene.joints3d is None or scene.cameras is None:
-            raise ValueError(f"pose_source 'joints3d': scene {scene.name!r} has no 3D joints with cameras")
-        joints3d = scene.joints3d if poses is None else poses
-        joints, depths, layout = scene.cameras.project(joints3d.float()), joints3d[..., 2].float(), scene.joints3d_layout
-    elif source == "keypoints2d":
-        if scene.keypoints2d is None:
-            raise ValueError(f"pose_source 'keypoints2d': scene {scene.name!r} has no 2D keypoints")
-        joints = scene.keypoints2d if poses is None else poses
-        conf, layout = scene.keypoints_conf, scene.keypoints_layout
+    if source in MODE_OF_SOURCE:
+        mode = MODE_OF_SOURCE[source]
+        try:
+            joints, _ = scene.pose_points(mode)
+        except ValueError as err:
+            raise ValueError(f"pose_source {source!r}: {err}") from None
+        layout = scene.pose_layout(mode)
+        if mode == "3d":
+            depths = scene.joints3d[..., 2].float()
+        else:
+            conf = scene.keypoints_conf
     else:
         if scene.gt is None or scene.gt.joints2d is None:
             raise ValueError(f"pose_source 'gt': scene {scene.name!r} has no ground-truth 2D joints")
@@ -130,7 +131,6 @@ class SceneFlowData(L.LightningDataModule):
         self.shuffle = shuffle
         self.num_workers = num_workers
         self.scene: Scene | None = scene if isinstance(scene, Scene) else None
-        self.poses: torch.Tensor | None = None
 
     @property
     def name(self) -> str:
@@ -143,13 +143,9 @@ class SceneFlowData(L.LightningDataModule):
         if self.scene.num_frames < 2:
             raise ValueError(f"scene {self.scene.name!r}: needs at least 2 frames for flow, has 1")
 
-    def set_poses(self, poses: torch.Tensor | None) -> None:
-        """Draw the stick-man from these poses instead of the scene's (e.g. refined ones)."""
-        self.poses = poses
-
     def sketch_inputs(self) -> SketchInputs:
         self.setup()
-        return sketch_inputs(self.scene, self.pose_source, self.poses)
+        return sketch_inputs(self.scene, self.pose_source)
 
     def _loader(self, shuffle: bool) -> DataLoader:
         self.setup()

@@ -21,9 +21,8 @@ import torch.nn.functional as F
 from kornia.morphology import dilation
 from lightning.pytorch.utilities import rank_zero_warn
 
-from ..core import inside_image
 from ..finite import FiniteGuard
-from ..metrics import EndPointError, PointEndPointError
+from ..metrics import EndPointError, FlowMetrics
 from .gate import gate_sketch
 from .raft import load_raft, predict_flow
 from .sketch import SketchConfig, sketch_from_layout, target_flow
@@ -96,10 +95,7 @@ class FlowTTT(L.LightningModule):
         self.sketch_masks: torch.Tensor | None = None  # (P, H, W)
         self.original: torch.Tensor | None = None  # (P, 2, H, W): the untuned network's prediction
         self.target_report: dict[str, float] = {}
-        self.val_epe = EndPointError()
-        self.val_epe_person = EndPointError()
-        self.val_epe_background = EndPointError()
-        self.val_epe_joints = PointEndPointError(mode="nearest")
+        self.val_metrics = FlowMetrics(prefix="val/")  # lit_boot.metrics.suite: the one convention
         self.val_drift = EndPointError()
 
     # --- targets --------------------------------------------------------------------------------
@@ -158,15 +154,16 @@ class FlowTTT(L.LightningModule):
             report["target/epe_base_painted"] = err(base)
         return report
 
-    def set_targets(self, targets: torch.Tensor, sketch_masks: torch.Tensor) -> None:
-        """Use precomputed targets (P, 2, H, W) and sketch masks (P, H, W)."""
-        self.targets, self.sketch_masks = targets.float().cpu(), sketch_masks.bool().cpu()
+    def forget_targets(self) -> None:
+        """Drop the targets, sketches and untuned flows, so that the next fit rebuilds them from
+        its datamodule's poses (the orchestrator's next flow stage, after the poses changed)."""
+        self.targets = self.sketch_masks = self.original = None
 
     def on_fit_start(self) -> None:
         dm = self.trainer.datamodule
         if self.targets is None:
             if dm is None:
-                raise RuntimeError("FlowTTT.fit needs a SceneFlowData datamodule (or call set_targets first)")
+                raise RuntimeError("FlowTTT.fit needs a SceneFlowData datamodule")
             self.target_report = self.build_targets(dm)
             for logger in self.loggers:
                 logger.log_metrics(self.target_report, step=0)
@@ -264,15 +261,8 @@ class FlowTTT(L.LightningModule):
     def validation_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
         flow = self._predict(batch)
         idx = batch["index"].cpu()
-        if "gt_flow" in batch:
-            self.val_epe.update(flow, batch["gt_flow"], batch["gt_valid"])
-            if "person" in batch:
-                self.val_epe_person.update(flow, batch["gt_flow"], batch["gt_valid"] & batch["person"])
-                self.val_epe_background.update(flow, batch["gt_flow"], batch["gt_valid"] & ~batch["person"])
-        if "gt_joints" in batch:
-            joints = batch["gt_joints"]
-            H, W = flow.shape[-2:]
-            self.val_epe_joints.update(flow, joints, batch["gt_joints_next"] - joints, inside_image(joints, H, W))
+        self.val_metrics.update(flow, batch.get("gt_flow"), batch.get("gt_valid"), batch.get("person"),
+                                batch.get("gt_joints"), batch.get("gt_joints_next"))  # fmt: skip
         if self.original is not None and self.sketch_masks is not None:
             outside = ~self.person_region(self.sketch_masks[idx]).to(self.device)
             self.val_drift.update(flow, self.original[idx].to(self.device), outside)
@@ -285,13 +275,13 @@ class FlowTTT(L.LightningModule):
         return dilation(sketch_masks[:, None].float(), square)[:, 0] > 0
 
     def on_validation_epoch_end(self) -> None:
-        # the orchestrator's names and conventions (lit_boot.bootstrap.evaluate), under "val/"
-        for name, metric in [("val/epe", self.val_epe), ("val/epe_person", self.val_epe_person),
-                             ("val/epe_background", self.val_epe_background), ("val/epe_joints", self.val_epe_joints),
-                             ("val/drift_px", self.val_drift)]:  # fmt: skip
-            if metric.update_called:
-                self.log(name, metric.compute(), prog_bar=name in ("val/epe_person", "val/drift_px"))
-            metric.reset()
+        metrics = self.val_metrics.compute()
+        if self.val_drift.update_called:
+            metrics["val/drift_px"] = self.val_drift.compute()
+        for name, value in metrics.items():
+            self.log(name, value, prog_bar=name in ("val/epe_person", "val/drift_px"))
+        self.val_metrics.reset()
+        self.val_drift.reset()
 
     def predict_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> dict[str, torch.Tensor]:
         """{"index": (B,), "flow": (B, 2, H, W)} with ``predict_updates`` iterations."""

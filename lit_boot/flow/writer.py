@@ -1,51 +1,25 @@
 """Writing predicted flows: a Lightning prediction-writer callback.
 
-For every pair t -> t+1 it writes ``flow_<t>.flo`` (Middlebury) or one ``flows.npz`` (key
-``flow``, (P, 2, H, W) float32), and optionally ``flow_<t>.png`` colour images, into
+For every pair t -> t+1 it writes ``flow_<t>.flo`` (Middlebury) or one ``flows.npz``, and
+optionally ``flow_<t>.png`` colour images (the one flow file format: :mod:`lit_boot.data.flows`), into
 ``output_dir`` (default: ``<trainer.default_root_dir>/predictions``). Every file is written
 atomically; an existing output folder is refused unless ``overwrite``.
 """
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 from typing import Any
 
 import lightning as L
-import numpy as np
 import torch
 from lightning.pytorch.callbacks import BasePredictionWriter
 
-from ..data import flow_image, write_flo, write_png
-from ..data.atomic import atomic_write_bytes
+from ..data.flows import write_flows, write_flows_npz
 
 __all__ = ["FlowWriter", "write_flows", "write_flows_npz"]
 
 FORMATS = ("flo", "npz")
-
-
-def write_flows(folder: str | Path, flows: torch.Tensor, indices: list[int] | None = None, flo: bool = True,
-                png: bool = True) -> Path:
-    """Per pair t of ``indices`` (default 0..P-1) write ``flow_<t>.flo`` and/or the colour image
-    ``flow_<t>.png`` of flows (P, 2, H, W) px into ``folder``, atomically; returns the folder."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    indices = list(range(len(flows))) if indices is None else list(indices)
-    for i, flow in zip(indices, flows.detach().float().cpu()):
-        if flo:
-            write_flo(folder / f"flow_{i:06d}.flo", flow)
-        if png:
-            write_png(folder / f"flow_{i:06d}.png", flow_image(flow))
-    return folder
-
-
-def write_flows_npz(path: str | Path, flows: torch.Tensor, indices: list[int] | None = None) -> Path:
-    """One npz (keys ``flow`` (P, 2, H, W) float32, ``index`` (P,)), written atomically."""
-    indices = list(range(len(flows))) if indices is None else list(indices)
-    buffer = io.BytesIO()
-    np.savez(buffer, flow=flows.detach().float().cpu().numpy(), index=np.array(indices))
-    return atomic_write_bytes(path, buffer.getvalue())
 
 
 class FlowWriter(BasePredictionWriter):

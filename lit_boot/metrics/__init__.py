@@ -5,7 +5,8 @@ errors of flow sampled at query points); ``pose`` covers 3D joints in millimetre
 with root, scale or Procrustes alignment, and acceleration error in mm/frame^2). The
 functions take ``(pred, gt, mask, ...)`` tensors on any device; the classes accumulate
 float64 sum states (``dist_reduce_fx="sum"``) and divide only in ``compute()``, so results
-are exact across batches and processes and NaN when nothing was seen.
+are exact across batches and processes and NaN when nothing was seen. ``suite`` holds what
+lit-boot reports (FlowTTT, the refiners, the orchestrator), under one naming scheme.
 """
 
 from __future__ import annotations
@@ -34,8 +35,13 @@ from .pose import (
     procrustes_transform,
     scale_align,
 )
+from .suite import FlowMetrics, PoseMetrics, scene_flow_metrics, scene_pose_metrics
 
 __all__ = [
+    "FlowMetrics",
+    "PoseMetrics",
+    "scene_flow_metrics",
+    "scene_pose_metrics",
     "endpoint_error",
     "flow_error_sums",
     "flow_errors",

@@ -15,6 +15,9 @@ import torch
 from torch import Tensor
 from torchmetrics import Metric
 
+from ..core import LSP14
+from .flow import _sum_state
+
 __all__ = [
     "LSP14_ROOT",
     "align_root",
@@ -32,7 +35,7 @@ __all__ = [
 
 Alignment = Literal["root", "procrustes", "scale", "none"]
 Root = int | Sequence[int]
-LSP14_ROOT: tuple[int, int] = (2, 3)
+LSP14_ROOT: tuple[int, ...] = LSP14.root  # the pelvis: the mean of the hips
 _ALIGNMENTS = ("root", "procrustes", "scale", "none")
 
 
@@ -209,10 +212,6 @@ def acceleration_error(pred: Tensor, gt: Tensor, root: Root | None = LSP14_ROOT)
         return x[..., :-2, :, :] - 2.0 * x[..., 1:-1, :, :] + x[..., 2:, :, :]
 
     return torch.linalg.vector_norm(second_difference(pred) - second_difference(gt), dim=-1)
-
-
-def _sum_state(metric: Metric, name: str) -> None:
-    metric.add_state(name, default=torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum")
 
 
 class MeanPerJointPositionError(Metric):

@@ -9,27 +9,21 @@ optical flow, as Lightning modules.
   validating a refiner with it (``lit-boot validate``) evaluates the current poses;
 - :class:`LossPlateauStopping`: the authors' early stop;
 - :func:`refine_poses`: all of it in one call; :class:`PoseResult`: what comes out (saved as
-  poses.npz + poses.json, read back by :func:`load_pose_result`).
+  poses.npz + pose_report.json, read back by :func:`load_pose_result`).
 
 Never imports lit_boot.flow: the two halves meet only in the orchestrator.
 """
 
-from .api import make_trainer, refine_poses
+from .api import REFINERS, make_refiner, make_trainer, refine_poses
 from .camera import CameraModel
 from .data import DEFAULT_STEPS, PoseData, StepIndices
 from .flows import FlowSourceError, load_flows
 from .keypoints import AUTHORS_KEYPOINT_JOINTS, CONFIDENCE_MODES, confidence_weights, keypoints_for_layout
 from .objective import Objective, Term
 from .losses import (
-    bone_length_loss,
     bone_lengths,
     bone_matrix,
-    deviation_loss,
-    flow_consistency_loss,
     flow_residual,
-    keypoint_loss,
-    smooth_l1_per_frame,
-    temporal_loss,
     temporal_residual,
 )
 from .refiner import PoseLossWeights, PoseRefiner
@@ -38,6 +32,8 @@ from .result import PoseResult, load_pose_result
 from .stopping import LossPlateauStopping
 
 __all__ = [
+    "REFINERS",
+    "make_refiner",
     "PoseRefiner",
     "PoseLossWeights",
     "KeypointRefiner",
@@ -59,14 +55,8 @@ __all__ = [
     "keypoints_for_layout",
     "Objective",
     "Term",
-    "smooth_l1_per_frame",
     "flow_residual",
     "temporal_residual",
-    "flow_consistency_loss",
-    "deviation_loss",
-    "keypoint_loss",
-    "temporal_loss",
     "bone_matrix",
     "bone_lengths",
-    "bone_length_loss",
 ]

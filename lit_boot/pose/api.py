@@ -16,7 +16,17 @@ from .refiner2d import KeypointRefiner
 from .result import PoseResult
 from .stopping import LossPlateauStopping
 
-__all__ = ["refine_poses", "make_trainer"]
+__all__ = ["refine_poses", "make_trainer", "REFINERS", "make_refiner"]
+
+#: The refiner of each mode: 3D joints and cameras, or 2D keypoints alone.
+REFINERS: dict[str, type[PoseRefiner] | type[KeypointRefiner]] = {"3d": PoseRefiner, "2d": KeypointRefiner}
+
+
+def make_refiner(mode: str, **kwargs: Any) -> PoseRefiner | KeypointRefiner:
+    """The refiner of ``mode`` ("3d" or "2d") built from ``kwargs``."""
+    if mode not in REFINERS:
+        raise ValueError(f"mode: expected one of {tuple(REFINERS)}, got {mode!r}")
+    return REFINERS[mode](**kwargs)
 
 
 def make_trainer(
@@ -52,13 +62,11 @@ def refine_poses(
     """Refine ``scene``'s 3D joints and cameras (mode "3d", :class:`PoseRefiner`) or its 2D
     keypoints (mode "2d", :class:`KeypointRefiner`) against ``flows`` (see :class:`PoseData`).
 
-    ``refiner_kwargs`` go to the refiner (weights, lr, ...); without ``output_dir`` nothing is
+    ``refiner_kwargs`` go to the refiner (loss_weights, lr, ...); without ``output_dir`` nothing is
     saved. Returns the :class:`PoseResult`.
     """
-    if mode not in ("3d", "2d"):
-        raise ValueError(f"mode: expected '3d' or '2d', got {mode!r}")
     refiner_kwargs.setdefault("save", "output_dir" in refiner_kwargs)
-    model = PoseRefiner(**refiner_kwargs) if mode == "3d" else KeypointRefiner(**refiner_kwargs)
+    model = make_refiner(mode, **refiner_kwargs)
     with tempfile.TemporaryDirectory(prefix="lit_boot_pose_") as tmp:
         trainer = trainer or make_trainer(steps, early_stop, default_root_dir=tmp)
         trainer.fit(model, datamodule=PoseData(scene, flows, steps=steps))

@@ -7,7 +7,7 @@ whole video. Loss terms are logged every ``trainer.log_every_n_steps`` steps (Li
 ``self.log`` costs milliseconds per call: logging every step would dominate the run), the
 evaluation against ground truth before the first step, every ``eval_every_n_steps`` steps
 and after the last. At the end, :attr:`RefinerBase.result` holds a :class:`PoseResult`, also
-saved (poses.npz, poses.json) into the run folder. A non-finite loss, gradient or variable
+saved (poses.npz, pose_report.json) into the run folder. A non-finite loss, gradient or variable
 stops the optimisation with the last finite variables restored
 (:class:`~lit_boot.finite.FiniteGuard`; the result's ``steps`` counts the steps kept).
 Validation (``trainer.validate``, ``lit-boot validate``) evaluates the current poses without
@@ -28,6 +28,7 @@ from lightning.pytorch.callbacks import Callback
 from lightning.pytorch.trainer.states import TrainerFn
 
 from ..core import Scene
+from ..data.readers.pose_file import PoseEstimates
 from ..finite import FiniteGuard, finite_fault
 from .keypoints import CONFIDENCE_MODES
 from .losses import flow_residual, inside_image
@@ -102,31 +103,32 @@ class RefinerBase(L.LightningModule):
         self._started = 0.0
         self._scene_key: tuple | None = None
 
-    def save_settings(self, weights: Any, weights_type: type, confidence: str) -> None:
+    def save_settings(self, loss_weights: Any, weights_type: type, confidence: str) -> None:
         """The constructor tail both refiners share; a subclass's ``__init__`` calls it.
 
-        Checks ``confidence``, makes ``self.weights`` a ``weights_type`` (the lambdas dataclass)
+        Checks ``confidence``, makes ``self.loss_weights`` a ``weights_type`` (the lambdas dataclass)
         from an instance, a dict of some of its fields, or None (the defaults), and saves every
         argument of the calling ``__init__`` as ``hparams``, the lambdas as a plain dict.
         """
         if confidence not in CONFIDENCE_MODES:
             raise ValueError(f"confidence: expected one of {CONFIDENCE_MODES}, got {confidence!r}")
+        weights = loss_weights
         if isinstance(weights, dict):
             known = [f.name for f in fields(weights_type)]
             unknown = sorted(set(weights) - set(known))
             if unknown:
-                raise ValueError(f"weights: unknown lambda {unknown[0]!r}; expected some of {known}")
+                raise ValueError(f"loss_weights: unknown lambda {unknown[0]!r}; expected some of {known}")
             weights = weights_type(**weights)
         elif weights is None:
             weights = weights_type()
         elif not isinstance(weights, weights_type):
-            raise TypeError(f"weights: expected a {weights_type.__name__}, a dict or None, got {type(weights).__name__}")
-        self.weights = weights
+            raise TypeError(f"loss_weights: expected a {weights_type.__name__}, a dict or None, got {type(weights).__name__}")
+        self.loss_weights = weights
         # Saved from a helper: Lightning must read the arguments of the caller's frame (the
         # subclass __init__), not this one's.
-        self.save_hyperparameters(ignore=["weights"], frame=inspect.currentframe().f_back)
-        self.hparams["weights"] = asdict(weights)
-        self._hparams_initial["weights"] = asdict(weights)  # what loggers record as hparams
+        self.save_hyperparameters(ignore=["loss_weights"], frame=inspect.currentframe().f_back)
+        self.hparams["loss_weights"] = asdict(weights)
+        self._hparams_initial["loss_weights"] = asdict(weights)  # what loggers record as hparams
         self.image_size = (1, 1)
 
     def __setattr__(self, name: str, value: object) -> None:
@@ -146,10 +148,23 @@ class RefinerBase(L.LightningModule):
         raise NotImplementedError
 
     def evaluate(self) -> dict[str, float]:
+        """The current poses against ground truth under :mod:`lit_boot.metrics.suite`'s names
+        (``mpjpe_mm``, ``kp2d_px``, ...); {} without ground truth."""
         raise NotImplementedError
 
     def make_result(self) -> PoseResult:
         raise NotImplementedError
+
+    def result_with(self, mode: str, **poses: Any) -> PoseResult:
+        """This fit's :class:`PoseResult`: the refined ``poses`` (PoseEstimates fields) for the
+        scene's frames, with the report (steps, early stop, loss, metrics, settings)."""
+        estimates = PoseEstimates(**poses, frame_indices=self.frame_indices, image_size=self.image_size,
+                                  source=f"lit-boot {type(self).__name__}")  # fmt: skip
+        return PoseResult(
+            mode=mode, estimates=estimates, scene=self.scene_name, steps=int(self.global_step),
+            stopped_early=self.stopped_early(), loss=self.final_loss(), metrics_before=dict(self.metrics_before),
+            metrics_after=self.evaluate(), settings=dict(self.hparams),
+        )  # fmt: skip
 
     # --- building ------------------------------------------------------------------------------
     def prepare(self, scene: Scene, flows: torch.Tensor | None) -> None:
@@ -160,6 +175,9 @@ class RefinerBase(L.LightningModule):
                 f"for scene {scene.name!r}, got {tuple(flows.shape)}"
             )
         self.scene_name = scene.name
+        frames = scene.metadata.get("frame_indices")  # the video frames the rows are (a clip of a longer video)
+        self.frame_indices = torch.as_tensor(frames if frames is not None else range(scene.num_frames), dtype=torch.int64)
+        self.image_size = (scene.height, scene.width)
         self.build(scene, None if flows is None else flows.float())
         self.result = None
         self.prepared = True
@@ -206,10 +224,6 @@ class RefinerBase(L.LightningModule):
             r = r * inside_image(points[:-1].detach(), *self.image_size)[..., None]
         return r
 
-    def loss_terms(self) -> dict[str, torch.Tensor]:
-        """Each weighted term's current value by name (without gradient)."""
-        return self.total_loss(with_terms=True)[1]
-
     def training_step(self, batch: int, batch_idx: int) -> torch.Tensor:
         every = self.trainer.log_every_n_steps if self._trainer is not None else 1
         step = self.global_step
@@ -221,19 +235,21 @@ class RefinerBase(L.LightningModule):
             self.log_dict(logged, on_step=True, on_epoch=False, batch_size=1)
         n = self.hparams.eval_every_n_steps
         if n and (step + 1) % n == 0:
-            metrics = self.evaluate()
-            if metrics:
-                self.log_dict(metrics, on_step=True, on_epoch=False, batch_size=1)
+            self._log_evaluation(on_step=True)
         return loss
 
+    def _log_evaluation(self, on_step: bool, extra: dict[str, Any] | None = None) -> None:
+        """Log :meth:`evaluate` as ``val/<name>`` (and ``extra`` as given), if anything."""
+        logged = {**(extra or {}), **{f"val/{k}": v for k, v in self.evaluate().items()}}
+        if logged:
+            self.log_dict(logged, on_step=on_step, on_epoch=not on_step, batch_size=1)
+
     def validation_step(self, batch: int, batch_idx: int) -> None:
-        """Log the current poses' evaluation (eval/*, with ground truth) and loss terms
+        """Log the current poses' evaluation (val/*, with ground truth) and loss terms
         (loss/*). While fitting it logs nothing: the training epoch's end logs the same."""
         if self.trainer.state.fn == TrainerFn.FITTING:
             return
-        logged = {f"loss/{k}": v for k, v in self.final_loss().items()}
-        logged.update(self.evaluate())
-        self.log_dict(logged, on_step=False, on_epoch=True, batch_size=1)
+        self._log_evaluation(on_step=False, extra={f"loss/{k}": v for k, v in self.final_loss().items()})
 
     # --- hooks -----------------------------------------------------------------------------------
     def configure_callbacks(self) -> list[Callback]:
@@ -247,12 +263,10 @@ class RefinerBase(L.LightningModule):
         self.metrics_before = self.evaluate()
         if self.metrics_before:
             for logger in self.loggers:
-                logger.log_metrics(self.metrics_before, step=0)
+                logger.log_metrics({f"val/{k}": v for k, v in self.metrics_before.items()}, step=0)
 
     def on_train_epoch_end(self) -> None:
-        metrics = self.evaluate()
-        if metrics:
-            self.log_dict(metrics, on_step=False, on_epoch=True, batch_size=1)
+        self._log_evaluation(on_step=False)
 
     def on_train_end(self) -> None:
         self.result = self.make_result()

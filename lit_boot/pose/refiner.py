@@ -20,11 +20,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 from ..core import Scene, get_layout
-from ..metrics import AccelerationError, MeanPerJointPositionError
+from ..metrics import PoseMetrics
 from .base import RefinerBase
 from .camera import CameraModel
 from .keypoints import keypoints_for_layout
@@ -54,7 +53,7 @@ class PoseRefiner(RefinerBase):
 
     Args:
         lr: Adam learning rate on joints (metres) and camera variables (the paper: 1e-3).
-        weights: the lambdas (:class:`PoseLossWeights`; the paper's by default).
+        loss_weights: the lambdas (:class:`PoseLossWeights`; the paper's by default).
         keypoint_joints: joints that get the 2D term (names in the joints' layout; default the
             authors' 10: shoulders, elbows, wrists, knees, ankles).
         confidence: binary (1 where confidence > threshold: the authors), real (the confidence
@@ -78,7 +77,7 @@ class PoseRefiner(RefinerBase):
     def __init__(
         self,
         lr: float = 1e-3,
-        weights: PoseLossWeights | None = None,
+        loss_weights: PoseLossWeights | None = None,
         keypoint_joints: Sequence[str] | None = None,
         confidence: str = "binary",
         confidence_threshold: float = 0.0,
@@ -92,20 +91,19 @@ class PoseRefiner(RefinerBase):
         super().__init__(lr, eval_every_n_steps, save, output_dir, num_threads)
         if pixel_scale <= 0:
             raise ValueError(f"pixel_scale: expected a positive factor, got {pixel_scale}")
-        self.save_settings(weights, PoseLossWeights, confidence)
+        self.save_settings(loss_weights, PoseLossWeights, confidence)
         self.layout_name = "lsp14"
 
     # --- building ------------------------------------------------------------------------------
     def build(self, scene: Scene, flows: torch.Tensor | None) -> None:
         if scene.joints3d is None or scene.cameras is None:
             raise ValueError(f"PoseRefiner: scene {scene.name!r} has no 3D joints with cameras (use KeypointRefiner)")
-        w = self.weights
+        w = self.loss_weights
         if flows is None and w.opt != 0:
-            raise ValueError("PoseRefiner: no flows given; pass flows (a .flo folder, flows.npz or 'gt') or set weights.opt 0")
+            raise ValueError("PoseRefiner: no flows given; pass flows (a .flo folder, flows.npz or 'gt') or set loss_weights.opt 0")
         layout = get_layout(scene.joints3d_layout)
         self.layout_name = layout.name
         self.register_buffer("bones", bone_matrix(layout.length_bones, layout.num_joints), persistent=False)
-        self.image_size = (scene.height, scene.width)
         self.camera = CameraModel(scene.cameras)
         joints_m = scene.joints3d.detach().float() / 1000.0
         self.joints = nn.Parameter(joints_m.clone())
@@ -135,11 +133,7 @@ class PoseRefiner(RefinerBase):
         has_gt2d = gt is not None and gt.joints2d is not None and gt.joints_layout == layout.name
         self.register_buffer("gt_joints3d", gt.joints3d.float() if has_gt3d else None, persistent=False)
         self.register_buffer("gt_joints2d", gt.joints2d.float() if has_gt2d else None, persistent=False)
-        root = layout.root or (0,)
-        self.metric_mpjpe = MeanPerJointPositionError("root", root=root)
-        self.metric_pa_mpjpe = MeanPerJointPositionError("procrustes", root=root)
-        self.metric_accel = AccelerationError(root=root)
-        self.metric_proj = MeanPerJointPositionError("none")
+        self.pose_metrics = PoseMetrics(root=layout.root or (0,))
 
     # --- the loss -----------------------------------------------------------------------------
     def projected(self) -> torch.Tensor:
@@ -178,26 +172,11 @@ class PoseRefiner(RefinerBase):
         the projection's 2D error (px) against the GT 2D joints; {} without ground truth."""
         out: dict[str, float] = {}
         if self.gt_joints3d is not None:
-            pred = self.joints_mm()
-            metrics = [("eval/mpjpe_mm", self.metric_mpjpe), ("eval/pa_mpjpe_mm", self.metric_pa_mpjpe)]
-            if pred.shape[0] >= 3:
-                metrics.append(("eval/accel_mm_per_frame2", self.metric_accel))
-            for name, metric in metrics:
-                metric.reset()
-                metric.update(pred, self.gt_joints3d)
-                out[name] = float(metric.compute())
+            out.update(self.pose_metrics.joints3d(self.joints_mm(), self.gt_joints3d))
         if self.gt_joints2d is not None:
-            # 2D distances through the 3D metric: z = 0 on both sides.
-            self.metric_proj.reset()
-            self.metric_proj.update(F.pad(self.projected().detach(), (0, 1)), F.pad(self.gt_joints2d, (0, 1)))
-            out["eval/proj2d_px"] = float(self.metric_proj.compute())
+            out.update(self.pose_metrics.points2d("proj2d_px", self.projected().detach(), self.gt_joints2d))
         return out
 
     def make_result(self) -> PoseResult:
-        return PoseResult(
-            mode="3d", layout=self.layout_name, scene=self.scene_name,
-            joints3d=self.joints_mm().float().cpu(), cameras=self.camera.to_cameras(self.camera_vars),
-            projected2d=self.projected().detach().float().cpu(), steps=int(self.global_step),
-            stopped_early=self.stopped_early(), loss=self.final_loss(), metrics_before=dict(self.metrics_before),
-            metrics_after=self.evaluate(), settings=dict(self.hparams),
-        )  # fmt: skip
+        return self.result_with("3d", joints3d=self.joints_mm().float().cpu(), joints3d_layout=self.layout_name,
+                                cameras=self.camera.to_cameras(self.camera_vars))  # fmt: skip

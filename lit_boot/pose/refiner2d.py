@@ -15,11 +15,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 from ..core import Scene
-from ..metrics import MeanPerJointPositionError
+from ..metrics import PoseMetrics
 from .base import RefinerBase
 from .keypoints import confidence_weights
 from .losses import temporal_residual
@@ -43,7 +42,7 @@ class KeypointRefiner(RefinerBase):
 
     Args:
         lr: Adam learning rate in pixels (the authors: 0.1).
-        weights: the lambdas (:class:`KeypointLossWeights`).
+        loss_weights: the lambdas (:class:`KeypointLossWeights`).
         confidence: weights of the deviation term: binary (1 where confidence > threshold, so
             undetected keypoints are free to follow the flow), real, or none (all 1).
         confidence_threshold: detections at or below it weigh 0 in the deviation term.
@@ -56,7 +55,7 @@ class KeypointRefiner(RefinerBase):
     def __init__(
         self,
         lr: float = 0.1,
-        weights: KeypointLossWeights | None = None,
+        loss_weights: KeypointLossWeights | None = None,
         confidence: str = "binary",
         confidence_threshold: float = 0.0,
         flow_inside_only: bool = True,
@@ -66,23 +65,23 @@ class KeypointRefiner(RefinerBase):
         num_threads: int | None = 1,
     ):
         super().__init__(lr, eval_every_n_steps, save, output_dir, num_threads)
-        self.save_settings(weights, KeypointLossWeights, confidence)
+        self.save_settings(loss_weights, KeypointLossWeights, confidence)
         self.layout_name = "coco17"
 
     def build(self, scene: Scene, flows: torch.Tensor | None) -> None:
         if scene.keypoints2d is None:
             raise ValueError(f"KeypointRefiner: scene {scene.name!r} has no 2D keypoints")
-        if flows is None and self.weights.opt != 0:
-            raise ValueError("KeypointRefiner: no flows given; pass flows (a .flo folder, flows.npz or 'gt') or set weights.opt 0")
+        if flows is None and self.loss_weights.opt != 0:
+            raise ValueError("KeypointRefiner: no flows given; pass flows (a .flo folder, flows.npz or 'gt') or set loss_weights.opt 0")
         self.layout_name = scene.keypoints_layout
-        self.image_size = (scene.height, scene.width)
+        self.keypoints_conf = scene.keypoints_conf.detach().float().cpu()
         initial = scene.keypoints2d.detach().float()
         self.keypoints = nn.Parameter(initial.clone())
         self.register_buffer("initial_keypoints", initial, persistent=False)
         weight = confidence_weights(scene.keypoints_conf, self.hparams.confidence, self.hparams.confidence_threshold)
         self.register_buffer("init_weight", weight, persistent=False)
         self.register_buffer("flows", flows, persistent=False)
-        w, (T, K) = self.weights, initial.shape[:2]
+        w, (T, K) = self.loss_weights, initial.shape[:2]
         self.objective = Objective([
             Term("opt", (T - 1, K, 2), w.opt),
             Term("init", (T, K, 2), w.init, weight),
@@ -91,7 +90,7 @@ class KeypointRefiner(RefinerBase):
         gt = scene.gt
         has_gt = gt is not None and gt.keypoints2d is not None
         self.register_buffer("gt_keypoints", gt.keypoints2d.float() if has_gt else None, persistent=False)
-        self.metric_kp = MeanPerJointPositionError("none")
+        self.pose_metrics = PoseMetrics()
 
     def residuals(self) -> list[torch.Tensor]:
         """The active terms' residuals, in ``objective.names`` order (see the module doc)."""
@@ -110,15 +109,8 @@ class KeypointRefiner(RefinerBase):
         """Mean 2D keypoint error (px) against the GT keypoints (all keypoints, all frames)."""
         if self.gt_keypoints is None:
             return {}
-        self.metric_kp.reset()
-        # 2D distances through the 3D metric: z = 0 on both sides.
-        self.metric_kp.update(F.pad(self.keypoints.detach(), (0, 1)), F.pad(self.gt_keypoints, (0, 1)))
-        return {"eval/kp2d_px": float(self.metric_kp.compute())}
+        return self.pose_metrics.points2d("kp2d_px", self.keypoints.detach(), self.gt_keypoints)
 
     def make_result(self) -> PoseResult:
-        return PoseResult(
-            mode="2d", layout=self.layout_name, scene=self.scene_name,
-            keypoints2d=self.keypoints.detach().float().cpu(), steps=int(self.global_step),
-            stopped_early=self.stopped_early(), loss=self.final_loss(), metrics_before=dict(self.metrics_before),
-            metrics_after=self.evaluate(), settings=dict(self.hparams),
-        )  # fmt: skip
+        return self.result_with("2d", keypoints2d=self.keypoints.detach().float().cpu(),
+                                keypoints_conf=self.keypoints_conf, keypoints_layout=self.layout_name)  # fmt: skip

@@ -1,53 +1,49 @@
 """The refined poses: what a refiner returns, saves into its run folder, and loads back.
 
-Files (written atomically, so each appears complete or not at all)::
+One container for poses, one file format: the refined poses are a
+:class:`~lit_boot.data.readers.PoseEstimates` (3D mode: joints3d (T, J, 3) mm with cameras;
+2D mode: keypoints2d (T, K, 2) px with the scene's confidences), saved as a lit-boot pose file,
+so they read back with :func:`~lit_boot.data.readers.load_poses` and go into another run as
+its poses. The optimisation report sits beside them. Files (each written atomically)::
 
-    <folder>/poses.npz    joints3d (T, J, 3) mm, cameras_params (T, P), cameras_crops (T, 3)
-                          [weak perspective], projected2d (T, J, 2) px  -- 3D mode
-                          keypoints2d (T, K, 2) px                      -- 2D-only mode
-    <folder>/poses.json   mode, scene, layout, camera model, steps, early stop, final loss
-                          terms, metrics before and after, the refiner's settings
+    <folder>/poses.npz           the refined poses (format lit-boot-pose-estimates)
+    <folder>/pose_report.json    mode, scene, steps, early stop, final loss terms, metrics
+                                 before and after (lit_boot.metrics.suite's names), settings
 """
 
 from __future__ import annotations
 
-import dataclasses
-import io
 import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from ..core import Cameras, Scene
 from ..data.atomic import atomic_write_bytes
+from ..data.readers.pose_file import PoseEstimates, load_poses, save_poses
 
-__all__ = ["PoseResult", "load_pose_result", "POSES_NPZ", "POSES_JSON"]
+__all__ = ["PoseResult", "load_pose_result", "POSES_FILE", "REPORT_FILE"]
 
-POSES_NPZ = "poses.npz"
-POSES_JSON = "poses.json"
+POSES_FILE = "poses.npz"
+REPORT_FILE = "pose_report.json"
+REPORT_FORMAT = "lit-boot-pose-report"
 
 
 @dataclass
 class PoseResult:
-    """Refined poses of one scene.
+    """Refined poses of one scene (``estimates``) and how they were found.
 
-    mode: "3d" (joints3d (T, J, 3) mm in ``layout`` with ``cameras``, and their projection
-    ``projected2d`` (T, J, 2) px) or "2d" (``keypoints2d`` (T, K, 2) px in ``layout``).
-    metrics_before / metrics_after: evaluation against the scene's ground truth (empty
-    without it); loss: the final weighted loss terms; steps: optimiser steps run.
+    mode: "3d" or "2d"; metrics_before / metrics_after: evaluation against the scene's ground
+    truth (empty without it); loss: the final weighted loss terms; steps: optimiser steps run;
+    seconds: the fit's wall time; settings: the refiner's hyperparameters.
     """
 
     mode: str
-    layout: str
+    estimates: PoseEstimates
     scene: str = "scene"
-    joints3d: torch.Tensor | None = None
-    cameras: Cameras | None = None
-    projected2d: torch.Tensor | None = None
-    keypoints2d: torch.Tensor | None = None
     steps: int = 0
     stopped_early: bool = False
     loss: dict[str, float] = field(default_factory=dict)
@@ -56,66 +52,60 @@ class PoseResult:
     settings: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
 
+    @property
+    def joints3d(self) -> torch.Tensor | None:
+        """(T, J, 3) mm in 3D mode, else None."""
+        return self.estimates.joints3d
+
+    @property
+    def cameras(self) -> Cameras | None:
+        return self.estimates.cameras
+
+    @property
+    def keypoints2d(self) -> torch.Tensor | None:
+        """(T, K, 2) px in 2D mode, else None."""
+        return self.estimates.keypoints2d
+
+    @property
+    def layout(self) -> str:
+        """The joint layout of the refined poses."""
+        return self.estimates.joints3d_layout if self.mode == "3d" else self.estimates.keypoints_layout
+
+    @property
+    def projected2d(self) -> torch.Tensor | None:
+        """3D mode: the joints projected by the cameras, (T, J, 2) px; else None."""
+        return None if self.joints3d is None else self.cameras.project(self.joints3d.float())
+
     def apply_to(self, scene: Scene) -> Scene:
         """A copy of ``scene`` whose estimates are the refined ones (joints3d and cameras in 3D
-        mode, keypoints2d in 2D mode; confidences and ground truth unchanged)."""
-        if self.mode == "3d":
-            return dataclasses.replace(scene, joints3d=self.joints3d.clone(), cameras=self.cameras)
-        return dataclasses.replace(scene, keypoints2d=self.keypoints2d.clone())
+        mode, keypoints2d in 2D mode; see :meth:`PoseEstimates.apply_to`)."""
+        return self.estimates.apply_to(scene)
+
+    def report(self) -> dict[str, Any]:
+        """The optimisation report, as pose_report.json holds it."""
+        return {"format": REPORT_FORMAT, "version": 1, "mode": self.mode, "scene": self.scene, "steps": self.steps,
+                "stopped_early": self.stopped_early, "seconds": round(self.seconds, 3), "loss": self.loss,
+                "metrics_before": self.metrics_before, "metrics_after": self.metrics_after,
+                "settings": self.settings}  # fmt: skip
 
     def save(self, folder: str | os.PathLike) -> Path:
-        """Write poses.npz and poses.json into ``folder`` (created if needed); returns it."""
+        """Write poses.npz and pose_report.json into ``folder`` (created if needed); returns it."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        arrays: dict[str, np.ndarray] = {}
-        for key in ("joints3d", "projected2d", "keypoints2d"):
-            value = getattr(self, key)
-            if value is not None:
-                arrays[key] = value.detach().cpu().float().numpy()
-        if self.cameras is not None:
-            arrays["cameras_params"] = self.cameras.params.detach().cpu().float().numpy()
-            if self.cameras.crops is not None:
-                arrays["cameras_crops"] = self.cameras.crops.detach().cpu().float().numpy()
-        buffer = io.BytesIO()
-        np.savez(buffer, **arrays)
-        atomic_write_bytes(folder / POSES_NPZ, buffer.getvalue())
-        meta = {
-            "format": "lit-boot-poses",
-            "version": 1,
-            "mode": self.mode,
-            "scene": self.scene,
-            "layout": self.layout,
-            "cameras": None if self.cameras is None else {"model": self.cameras.model, "crop_size": self.cameras.crop_size},
-            "arrays": {key: list(a.shape) for key, a in arrays.items()},
-            "steps": self.steps,
-            "stopped_early": self.stopped_early,
-            "seconds": round(self.seconds, 3),
-            "loss": self.loss,
-            "metrics_before": self.metrics_before,
-            "metrics_after": self.metrics_after,
-            "settings": self.settings,
-        }
-        atomic_write_bytes(folder / POSES_JSON, (json.dumps(meta, indent=2, default=str) + "\n").encode())
+        save_poses(self.estimates, folder / POSES_FILE)
+        text = json.dumps(self.report(), indent=2, default=str) + "\n"
+        atomic_write_bytes(folder / REPORT_FILE, text.encode())
         return folder
 
 
 def load_pose_result(folder: str | os.PathLike) -> PoseResult:
     """Read what :meth:`PoseResult.save` wrote; FileNotFoundError names a missing file."""
     folder = Path(folder)
-    for name in (POSES_JSON, POSES_NPZ):
+    for name in (REPORT_FILE, POSES_FILE):
         if not (folder / name).is_file():
             raise FileNotFoundError(f"{folder / name}: no such file (expected refined poses written by a pose refiner)")
-    meta = json.loads((folder / POSES_JSON).read_text())
-    with np.load(folder / POSES_NPZ) as data:
-        arrays = {key: torch.from_numpy(np.array(data[key])) for key in data.files}
-    cameras = None
-    if meta["cameras"] is not None:
-        cam = meta["cameras"]
-        cameras = Cameras(cam["model"], arrays["cameras_params"], arrays.get("cameras_crops"), cam["crop_size"])
-    return PoseResult(
-        mode=meta["mode"], layout=meta["layout"], scene=meta["scene"], joints3d=arrays.get("joints3d"),
-        cameras=cameras, projected2d=arrays.get("projected2d"), keypoints2d=arrays.get("keypoints2d"),
-        steps=meta["steps"], stopped_early=meta["stopped_early"], loss=meta["loss"],
-        metrics_before=meta["metrics_before"], metrics_after=meta["metrics_after"],
-        settings=meta["settings"], seconds=meta["seconds"],
-    )  # fmt: skip
+    report = json.loads((folder / REPORT_FILE).read_text())
+    if report.get("format") != REPORT_FORMAT:
+        raise ValueError(f"{folder / REPORT_FILE}: not a {REPORT_FORMAT!r} file (format {report.get('format')!r})")
+    keys = ("mode", "scene", "steps", "stopped_early", "loss", "metrics_before", "metrics_after", "settings", "seconds")
+    return PoseResult(estimates=load_poses(folder / POSES_FILE), **{k: report[k] for k in keys})

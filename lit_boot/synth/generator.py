@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import torch
@@ -141,12 +141,22 @@ class _Renderer:
         return flow.float(), occluded
 
 
-def make_scene(config: SynthConfig | None = None, **overrides) -> Scene:
-    """Generate a synthetic scene (see :class:`SynthConfig`; keyword overrides allowed)."""
-    cfg = replace(config or SynthConfig(), **overrides)
-    if isinstance(cfg.estimates, dict):
-        cfg = replace(cfg, estimates=EstimateConfig(**cfg.estimates))
-    g = torch.Generator().manual_seed(cfg.seed)
+@dataclass
+class _Staging:
+    """What the frames are rendered from: the motion, the posed body, the camera rig and the
+    renderer, with T frames and S blur sub-frames per frame."""
+
+    motion: Motion
+    body: Body
+    rig: CameraRig
+    renderer: _Renderer
+    T: int
+    S: int
+
+
+def _stage(cfg: SynthConfig, g: torch.Generator) -> _Staging:
+    """Place the motion, frame it with the camera rig and build the renderer (its textures
+    drawn from ``g``)."""
     frame_times, blur_times = _sample_times(cfg)
     T, S = blur_times.shape
     all_times = torch.cat([frame_times, blur_times.flatten()]) if S > 1 else frame_times
@@ -168,14 +178,19 @@ def make_scene(config: SynthConfig | None = None, **overrides) -> Scene:
     wall_mm_per_px = mm_per_px + 2500.0 / rig.K.fx
     look = Appearance(body.material, g, body_texel_mm=1.5 * mm_per_px, background_texel_mm=1.5 * wall_mm_per_px)
     renderer = _Renderer(body, poses, rig, _world_planes(lo, hi, floor_y), look)
+    return _Staging(motion, body, rig, renderer, T, S)
 
-    H, W = cfg.height, cfg.width
+
+def _render(st: _Staging, cfg: SynthConfig, g: torch.Generator) -> tuple[torch.Tensor, ...]:
+    """frames (T, 3, H, W) uint8 (motion blur over S sub-frames, sensor noise from ``g``), GT
+    flows (T-1, 2, H, W) px, occluded (T-1, H, W), person masks (T, H, W) and depths (T, H, W) mm."""
+    T, S, H, W, renderer = st.T, st.S, cfg.height, cfg.width, st.renderer
     frames = torch.empty(T, 3, H, W, dtype=torch.uint8)
     flows = torch.empty(T - 1, 2, H, W)
     occluded = torch.empty(T - 1, H, W, dtype=torch.bool)
     person = torch.empty(T, H, W, dtype=torch.bool)
     depths: list[torch.Tensor] = []
-    hit_list: list[Hits] = []
+    hit_list: list[Hits | None] = []
     for i in range(T):
         hits = renderer.hits(i)
         hit_list.append(hits)
@@ -190,44 +205,53 @@ def make_scene(config: SynthConfig | None = None, **overrides) -> Scene:
         if i > 0:
             flows[i - 1], occluded[i - 1] = renderer.flow(i - 1, i, hit_list[i - 1], hits.depth, i)
             hit_list[i - 1] = None  # free memory
+    return frames, flows, occluded, person, torch.stack(depths)
 
-    # Ground-truth joints (camera frame) and the cameras that project them.
+
+def _joints(st: _Staging, depths: torch.Tensor, H: int, W: int) -> tuple[torch.Tensor, ...]:
+    """The true LSP-14 joints (T, 14, 3) mm camera frame and (T, 14, 2) px, the true COCO-17
+    keypoints (T, 17, 2) px, and which keypoints a detector can see (T, 17) bool: inside the
+    image, and their own surface not far behind the rendered one."""
+    T, rig, body, motion = st.T, st.rig, st.body, st.motion
     lsp_world = body.landmark_positions(motion, LSP14.names)[:T]
     coco_world = torch.cat([body.face_points(motion)[:T], body.landmark_positions(motion, COCO17.names[5:])[:T]], 1)
     to_cam = lambda x: torch.einsum("tij,tkj->tki", rig.R[:T].double(), x.double() - rig.C[:T, None].double())  # noqa: E731
     joints3d, coco3d = to_cam(lsp_world).float(), to_cam(coco_world).float()
     joints2d, coco2d = rig.K.project(joints3d), rig.K.project(coco3d)
-    K = rig.K
-    gt_cams = Cameras("pinhole", torch.tensor([[K.fx, K.fy, K.cx, K.cy, 0.0, 0.0, 0.0]]).repeat(T, 1))
-
-    # What a detector can see: the keypoint's own surface is not far behind the rendered one.
     px = coco2d.round().long()
     inside = (px[..., 0] >= 0) & (px[..., 0] < W) & (px[..., 1] >= 0) & (px[..., 1] < H)
     depth_at = torch.stack([depths[t][px[t, :, 1].clamp(0, H - 1), px[t, :, 0].clamp(0, W - 1)] for t in range(T)])
     visible = inside & (coco3d[..., 2] < depth_at + 0.08 * body.height_mm)
+    return joints3d, joints2d, coco2d, visible
 
+
+def make_scene(config: SynthConfig | None = None, **overrides) -> Scene:
+    """Generate a synthetic scene (see :class:`SynthConfig`; keyword overrides allowed)."""
+    cfg = replace(config or SynthConfig(), **overrides)
+    if isinstance(cfg.estimates, dict):
+        cfg = replace(cfg, estimates=EstimateConfig(**cfg.estimates))
+    g = torch.Generator().manual_seed(cfg.seed)
+    st = _stage(cfg, g)
+    T, H, W, K = st.T, cfg.height, cfg.width, st.rig.K
+    frames, flows, occluded, person, depths = _render(st, cfg, g)
+    joints3d, joints2d, coco2d, visible = _joints(st, depths, H, W)
+    gt_cams = Cameras("pinhole", torch.tensor([[K.fx, K.fy, K.cx, K.cy, 0.0, 0.0, 0.0]]).repeat(T, 1))
     est3d, cams = simulate_metro(joints3d.double(), joints2d.double(), cfg.estimates, g)
     keypoints, conf, events = simulate_keypoints(coco2d, visible, cfg.estimates, g)
     name = cfg.name or (f"synth_{cfg.motion}_s{cfg.seed}" if cfg.motion != "bvh" else f"synth_{Path(cfg.bvh).stem}_s{cfg.seed}")
     gt = GroundTruth(
-        flow=flows,
-        flow_valid=torch.ones(T - 1, H, W, dtype=torch.bool),
-        flow_occluded=occluded,
-        joints3d=joints3d,
-        joints2d=joints2d.float(),
-        joints_layout="lsp14",
-        cameras=gt_cams,
-        person_mask=person,
+        flow=flows, flow_valid=torch.ones(T - 1, H, W, dtype=torch.bool), flow_occluded=occluded, joints3d=joints3d,
+        joints2d=joints2d.float(), joints_layout="lsp14", cameras=gt_cams, person_mask=person,
         keypoints2d=coco2d.float(),
-    )
+    )  # fmt: skip
     metadata = {
         "generator": "lit_boot.synth",
         "config": json.loads(json.dumps(asdict(cfg))),  # tuples -> lists: loads back identical
         "keypoint_failures": events,
         "camera": {  # the true camera: x_cam = R @ (x_world - C); world axes x left, y up, z forward
             "fx_fy_cx_cy": [K.fx, K.fy, K.cx, K.cy],
-            "world_to_camera_R": rig.R[:T].tolist(),
-            "centre_mm": rig.C[:T].tolist(),
+            "world_to_camera_R": st.rig.R[:T].tolist(),
+            "centre_mm": st.rig.C[:T].tolist(),
         },
     }
     return Scene(

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import torch
 
+from ..core import project_pinhole
+
 __all__ = ["Intrinsics", "Hits", "pixel_rays", "cast"]
 
 #: Distance given to rays that hit nothing (a point at "infinity"), mm.
@@ -30,11 +32,9 @@ class Intrinsics:
     width: int
 
     def project(self, points: torch.Tensor) -> torch.Tensor:
-        """(..., 3) camera-frame mm -> (..., 2) px."""
-        z = points[..., 2:3].clamp_min(1e-6)
-        f = points.new_tensor([self.fx, self.fy])
-        c = points.new_tensor([self.cx, self.cy])
-        return points[..., :2] / z * f + c
+        """(..., 3) camera-frame mm -> (..., 2) px (the core's pinhole projection, no translation)."""
+        params = points.new_tensor([self.fx, self.fy, self.cx, self.cy, 0.0, 0.0, 0.0])
+        return project_pinhole(points.reshape(1, -1, 3), params[None]).reshape(*points.shape[:-1], 2)
 
 
 @dataclass

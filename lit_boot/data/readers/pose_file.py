@@ -296,8 +296,7 @@ def load_poses(path: str | os.PathLike) -> PoseEstimates:
     header, arrays = _read_raw(path)
     fmt, version = header.get("format"), header.get("version")
     if fmt != POSES_FORMAT:
-        hint = " (a refiner's output: use lit_boot.pose.result.load_pose_result)" if "mode" in header else ""
-        raise DatasetFormatError(f"{path}: not a {POSES_FORMAT!r} file (format {fmt!r}){hint}")
+        raise DatasetFormatError(f"{path}: not a {POSES_FORMAT!r} file (format {fmt!r})")
     if not isinstance(version, int) or not 1 <= version <= POSES_FORMAT_VERSION:
         raise DatasetFormatError(f"{path}: unsupported version {version!r} (reads 1..{POSES_FORMAT_VERSION})")
     if "frame_indices" not in arrays:

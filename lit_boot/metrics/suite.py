@@ -1,0 +1,137 @@
+"""The metrics lit-boot reports, under one naming scheme and one convention.
+
+Names (the same everywhere: FlowTTT's and the refiners' validation, the orchestrator's stage
+records, summary.json, :class:`~lit_boot.pose.PoseResult`):
+
+- flow, px: ``epe`` (every valid, non-occluded pixel: :meth:`GroundTruth.flow_mask`),
+  ``epe_person`` / ``epe_background`` (those pixels on / off the GT person mask of frame t),
+  ``epe_joints`` (the authors' convention: each GT joint's displacement t -> t+1 against the
+  flow at the joint's rounded pixel, joints inside the image);
+- 3D poses, mm: ``mpjpe_mm`` (root-aligned, the layout's root), ``pa_mpjpe_mm`` (Procrustes),
+  ``accel_mm_per_frame2`` (3 frames or more); 2D points, px: ``proj2d_px`` (3D mode: the
+  projected joints against the GT 2D joints), ``kp2d_px`` (2D mode: the keypoints against the
+  GT keypoints).
+
+Lightning modules log them as ``val/<name>``; the orchestrator's records and the pose results
+hold the bare names. EPE-like means pool every selected pixel (or joint) of every pair.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from ..core import GroundTruth, Scene, get_layout, inside_image
+from .flow import EndPointError, PointEndPointError
+from .pose import AccelerationError, MeanPerJointPositionError, Root
+
+__all__ = ["FlowMetrics", "PoseMetrics", "scene_flow_metrics", "scene_pose_metrics"]
+
+
+class FlowMetrics(torch.nn.Module):
+    """``epe``, ``epe_person``, ``epe_background``, ``epe_joints`` (px), accumulated over
+    batches of pairs (torchmetrics sum states); :meth:`compute` holds only those updated, each
+    name prefixed by ``prefix`` (e.g. ``"val/"``)."""
+
+    def __init__(self, prefix: str = ""):
+        super().__init__()
+        self.prefix = prefix
+        self.epe = EndPointError()
+        self.epe_person = EndPointError()
+        self.epe_background = EndPointError()
+        self.epe_joints = PointEndPointError(mode="nearest")
+
+    def update(
+        self,
+        flow: Tensor,
+        gt_flow: Tensor | None = None,
+        mask: Tensor | None = None,
+        person: Tensor | None = None,
+        joints: Tensor | None = None,
+        joints_next: Tensor | None = None,
+    ) -> None:
+        """flow, gt_flow: (B, 2, H, W) px; mask: (B, H, W) bool, the pixels that count (valid and
+        not occluded); person: (B, H, W) bool; joints, joints_next: (B, K, 2) px, the GT joints
+        in frames t and t+1. What is None is not scored."""
+        if gt_flow is not None:
+            self.epe.update(flow, gt_flow, mask)
+        if gt_flow is not None and person is not None:
+            self.epe_person.update(flow, gt_flow, mask & person)
+            self.epe_background.update(flow, gt_flow, mask & ~person)
+        if joints is not None:
+            H, W = flow.shape[-2:]
+            self.epe_joints.update(flow, joints, joints_next - joints, inside_image(joints, H, W))
+
+    def compute(self) -> dict[str, Tensor]:
+        return {self.prefix + name: metric.compute() for name, metric in self.named_children() if metric.update_called}
+
+    def reset(self) -> None:
+        for metric in self.children():
+            metric.reset()
+
+
+class PoseMetrics(torch.nn.Module):
+    """Pose errors against ground truth, computed at once on whole videos: :meth:`joints3d`
+    (``mpjpe_mm``, ``pa_mpjpe_mm``, ``accel_mm_per_frame2``) and :meth:`points2d` (a mean 2D
+    distance in px under a given name). ``root``: the layout's root joint indices."""
+
+    def __init__(self, root: Root = (0,)):
+        super().__init__()
+        self.mpjpe = MeanPerJointPositionError("root", root=root)
+        self.pa_mpjpe = MeanPerJointPositionError("procrustes", root=root)
+        self.accel = AccelerationError(root=root)
+        self.points = MeanPerJointPositionError("none")
+
+    @staticmethod
+    def _once(metric, *args: Tensor) -> float:
+        metric.reset()
+        metric.update(*args)
+        return float(metric.compute())
+
+    @torch.no_grad()
+    def joints3d(self, pred: Tensor, gt: Tensor) -> dict[str, float]:
+        """pred, gt: (T, J, 3) mm."""
+        out = {"mpjpe_mm": self._once(self.mpjpe, pred, gt), "pa_mpjpe_mm": self._once(self.pa_mpjpe, pred, gt)}
+        if pred.shape[0] >= 3:
+            out["accel_mm_per_frame2"] = self._once(self.accel, pred, gt)
+        return out
+
+    @torch.no_grad()
+    def points2d(self, name: str, pred: Tensor, gt: Tensor) -> dict[str, float]:
+        """{name: mean distance px} of pred, gt (T, K, 2) px over every point of every frame."""
+        return {name: self._once(self.points, F.pad(pred, (0, 1)), F.pad(gt, (0, 1)))}  # z = 0 on both sides
+
+
+@torch.no_grad()
+def scene_flow_metrics(gt: GroundTruth | None, flows: Tensor) -> dict[str, float]:
+    """The flow metrics of ``flows`` (T-1, 2, H, W) px against a scene's ground truth (the GT
+    flow's, and ``epe_joints`` with GT 2D joints); {} without either."""
+    if gt is None:
+        return {}
+    metrics = FlowMetrics()
+    joints = gt.joints2d.float() if gt.joints2d is not None else None
+    metrics.update(flows.float(), gt.flow.float() if gt.flow is not None else None, gt.flow_mask(),
+                   gt.person_mask[:-1] if gt.person_mask is not None else None,
+                   joints[:-1] if joints is not None else None, joints[1:] if joints is not None else None)  # fmt: skip
+    return {name: float(value) for name, value in metrics.compute().items()}
+
+
+@torch.no_grad()
+def scene_pose_metrics(scene: Scene, mode: str) -> dict[str, float]:
+    """The scene's current estimates against its ground truth: 3D mode, the 3D joints (GT in
+    the same layout) and their projection (GT 2D joints); 2D mode, ``kp2d_px``; {} without GT."""
+    gt = scene.gt
+    if gt is None:
+        return {}
+    if mode == "2d":
+        if gt.keypoints2d is None or scene.keypoints2d is None:
+            return {}
+        return PoseMetrics().points2d("kp2d_px", scene.keypoints2d.float(), gt.keypoints2d.float())
+    if scene.joints3d is None or get_layout(gt.joints_layout) != get_layout(scene.joints3d_layout):
+        return {}
+    metrics = PoseMetrics(root=get_layout(scene.joints3d_layout).root or (0,))
+    out = metrics.joints3d(scene.joints3d.float(), gt.joints3d.float()) if gt.joints3d is not None else {}
+    if gt.joints2d is not None and scene.cameras is not None:
+        out.update(metrics.points2d("proj2d_px", scene.cameras.project(scene.joints3d.float()), gt.joints2d.float()))
+    return out
