@@ -6,6 +6,7 @@ import csv
 import dataclasses
 import hashlib
 import json
+import logging
 
 import cv2
 import pytest
@@ -168,7 +169,8 @@ def test_interrupted_run_resumes_after_the_last_finished_stage(shared, tiny_scen
 
 @pytest.mark.shared
 def test_drift_guard_rolls_back_a_stage_that_worsens_the_image_evidence(shared, tiny_scene, tmp_path, monkeypatch,
-                                                                        caplog):
+                                                                        caplog, capsys):
+    caplog.set_level(logging.INFO, logger="lit_boot")
     photo = iter([1.0, 0.9])  # initial, flow_1: the flow explains the frames better
     tracks = iter([1.0, 1.2])  # initial, pose_1: the joint tracks 20% worse
     monkeypatch.setattr(runner_module, "photo_error", lambda *a, **k: next(photo))
@@ -182,6 +184,7 @@ def test_drift_guard_rolls_back_a_stage_that_worsens_the_image_evidence(shared, 
     assert summary["drift_guard_events"] == [{"stage": "pose_1", "guard": "drift", "evidence": "track_error",
                                               "before": 1.0, "after": 1.2, "action": "rollback"}]  # fmt: skip
     assert "joint tracks' census error rose 1.000 -> 1.200; pose_1 rolled back" in caplog.text  # logged, not printed
+    assert "stage 1/3 flow_1" in caplog.text and "stage 1/3" not in capsys.readouterr().out
 
 
 def test_drift_guard_tolerance_and_record(tmp_path):
