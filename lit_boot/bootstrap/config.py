@@ -41,11 +41,12 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off"},
     },
     "default": {
-        # 3D: the sketch's pixels weigh 10x in a SmoothL1 with beta 0.1; the self-check holds the
-        # background (BENCHMARKS.md, "Do no harm"); 2D keeps weight 1 until its suite says otherwise
+        # the sketch's pixels weigh 10x in a SmoothL1 with beta 0.1; the self-check holds the
+        # background (BENCHMARKS.md, "Do no harm": the synthetic suites in both modes, the Sintel windows)
         "flow_3d": {"sketch": {"footprint": "cross", "size": 15}, "loss": "final", "train_updates": 20, "lr": 1e-5,
                     "sketch_weight": 10.0, "loss_beta": 0.1},
-        "flow_2d": {"sketch": {"footprint": "cross", "size": 15}, "loss": "final", "train_updates": 20, "lr": 1e-5},
+        "flow_2d": {"sketch": {"footprint": "cross", "size": 15}, "loss": "final", "train_updates": 20, "lr": 1e-5,
+                    "sketch_weight": 10.0, "loss_beta": 0.1},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
         "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric"},
@@ -76,8 +77,8 @@ class BootstrapConfig:
             only; paper 3.3).
         preset: the method's choices the run starts from. default: the paper's text, the
             stick-man painted with crosses of radius 15 px at a person 450 px tall, scaled to
-            the person's height in the video (at least 2 px); the self-check on; in 3D mode the
-            sketch's pixels weigh 10x in the loss (SmoothL1 beta 0.1). paper: the authors' code, 30x30
+            the person's height in the video (at least 2 px); the self-check on; the sketch's
+            pixels weigh 10x in the loss (SmoothL1 beta 0.1). paper: the authors' code, 30x30
             px squares (6x6 in 2d mode) at 22 points per bone, whatever the person's size.
             Both: 20 RAFT updates in training, loss on the final prediction, lr 1e-5, binary
             confidences, 16-bit mixed precision on CUDA. --flow and --pose override them key
