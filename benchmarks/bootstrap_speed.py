@@ -3,14 +3,14 @@
 Usage:
   python benchmarks/bootstrap_speed.py [--height 436 --width 1024 --frames 12] [--arch raft_small]
       [--weights ../shared/checkpoints/raft-small.pth] [--precision 16-mixed] [--train-updates 20]
-      [--crop-margin 48] [--epochs 8] [--pose-steps 1500]
+      [--grad-updates 5] [--crop-margin 48] [--epochs 8] [--pose-steps 1500]
 
 One synthetic scene (run s0), one bootstrap run (flow -> pose -> flow, default preset) in this
 process. "RAFT" = the run's own initial stage: plain inference of every pair with 32 updates, so
 the ratio compares like with like in the same run. Peak memory: CUDA max allocated, or the
 process's peak resident set size on CPU. The levers: --precision (bf16-mixed / 16-mixed on
-CUDA), --train-updates (RAFT iterations per training step), --crop-margin (train on a crop around
-the person), --epochs.
+CUDA), --train-updates (RAFT iterations per training step), --grad-updates (backpropagate through
+the last N of them only), --crop-margin (train on a crop around the person), --epochs.
 """
 
 from __future__ import annotations
@@ -39,12 +39,14 @@ def main() -> None:
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))
     p.add_argument("--precision", default=None, help="Lightning precision of the flow stages (default: the preset's)")
     p.add_argument("--train-updates", type=int, default=20)
+    p.add_argument("--grad-updates", type=int, default=None, help="backpropagate through the last N updates only")
     p.add_argument("--crop-margin", type=int, default=None)
     p.add_argument("--epochs", type=int, default=8)
     p.add_argument("--pose-steps", type=int, default=1500)
     args = p.parse_args()
     scene = make_scene(motion="run", frames=args.frames, height=args.height, width=args.width, seed=0)
-    flow = {"arch": args.arch, "weights": args.weights, "train_updates": args.train_updates, "crop_margin": args.crop_margin}
+    flow = {"arch": args.arch, "weights": args.weights, "train_updates": args.train_updates, "crop_margin": args.crop_margin,
+            "grad_updates": args.grad_updates}  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         result = bootstrap(scene, Path(tmp) / "run", flow=flow, flow_epochs=args.epochs, pose_steps=args.pose_steps,
                            precision=args.precision, progress_bar=False, video=False)  # fmt: skip

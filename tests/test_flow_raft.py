@@ -219,3 +219,25 @@ def test_known_weights_are_hash_checked_once(shared, tmp_path, monkeypatch):
     copy.write_bytes(original.read_bytes()[:-1000] + bytes(1000))  # changed in place: hashed again
     with pytest.raises(weights.WeightsHashError, match="copy/raft-small.pth"):
         load_raft("raft_small", copy)
+
+
+@pytest.mark.parametrize("builder", [raft_small, raft_large])
+def test_truncated_backprop_gives_the_forwards_flows_and_gradients_through_the_last_updates(builder):
+    torch.manual_seed(0)
+    model = builder().eval()  # random weights; eval: BatchNorm (raft_large's context) uses its running stats
+    a, b = torch.rand(3, 40, 60), torch.rand(3, 40, 60)
+    with torch.no_grad():
+        full = predict_flow(model, a, b, num_flow_updates=5, all_updates=True)
+        every = predict_flow(model, a, b, num_flow_updates=5, all_updates=True, grad_updates=5)
+        last = predict_flow(model, a, b, num_flow_updates=5, all_updates=True, grad_updates=2)
+    assert len(every) == 5 and len(last) == 2
+    for mine, theirs in zip(every, full):  # the same iterations as torchvision's forward
+        torch.testing.assert_close(mine, theirs, rtol=1e-4, atol=1e-5)
+    torch.testing.assert_close(last[-1], full[-1], rtol=1e-4, atol=1e-5)
+    loss = predict_flow(model, a, b, num_flow_updates=5, grad_updates=2).abs().mean()
+    loss.backward()
+    grads = {name: p.grad for name, p in model.named_parameters()}
+    assert grads["update_block.motion_encoder.convcorr1.0.weight"].abs().sum() > 0  # the last updates train
+    assert grads["context_encoder.convnormrelu.0.weight"].abs().sum() > 0  # the context reaches them
+    with pytest.raises(ValueError, match="grad_updates: expected 1..5"):
+        predict_flow(model, a, b, num_flow_updates=5, grad_updates=6)

@@ -48,9 +48,10 @@ def test_target_updates_and_loss_beta(scene):
     assert model._loss([large], target, weight).item() == pytest.approx(2.0 - 0.05)
 
 
-def test_fine_tuning_moves_the_flow_towards_the_target(scene, tmp_path):
+@pytest.mark.parametrize("grad_updates", [None, 1])  # truncated backprop: through the last update only
+def test_fine_tuning_moves_the_flow_towards_the_target(scene, tmp_path, grad_updates):
     torch.manual_seed(0)
-    model = FlowTTT(weights=None, lr=1e-3, **FAST)
+    model = FlowTTT(weights=None, lr=1e-3, grad_updates=grad_updates, **FAST)
     data = SceneFlowData(scene, pose_source="gt", shuffle=False)
     model.build_targets(data)
     targets = model.targets.clone()
@@ -128,6 +129,8 @@ def test_bad_options_are_refused():
         FlowTTT(weights=None, loss="l2")
     with pytest.raises(ValueError, match="train_parts"):
         FlowTTT(weights=None, train_parts="encoder")
+    with pytest.raises(ValueError, match=r"grad_updates: expected None or 1..2"):
+        FlowTTT(weights=None, train_updates=2, grad_updates=3)
     with pytest.raises(ValueError, match="pose_source"):
         SceneFlowData("nowhere", pose_source="mocap")
 

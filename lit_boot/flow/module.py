@@ -41,6 +41,9 @@ class FlowTTT(L.LightningModule):
         weights: a weights file (torchvision or original princeton-vl format) or a torchvision
             weights name (C_T_V1, C_T_V2, C_T_SKHT_V2, ...).
         train_updates: RAFT iterations per training step (the authors: 20).
+        grad_updates: backpropagate through the last this many of them only (truncated
+            backpropagation: the earlier iterations run without gradient, and only the returned
+            iterations are upsampled); None: through all (the authors).
         predict_updates: RAFT iterations for predictions and validation.
         lr: Adam learning rate (the paper: 1e-5).
         loss: final (SmoothL1 on the last prediction, as the authors) or sequence (RAFT's
@@ -66,6 +69,7 @@ class FlowTTT(L.LightningModule):
         arch: str = "raft_small",
         weights: str | None = "C_T_V1",
         train_updates: int = 20,
+        grad_updates: int | None = None,
         predict_updates: int = 32,
         lr: float = 1e-5,
         loss: str = "final",
@@ -84,6 +88,8 @@ class FlowTTT(L.LightningModule):
             raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
         if train_parts not in TRAIN_PARTS:
             raise ValueError(f"train_parts: expected one of {TRAIN_PARTS}, got {train_parts!r}")
+        if grad_updates is not None and not 1 <= grad_updates <= train_updates:
+            raise ValueError(f"grad_updates: expected None or 1..{train_updates} (train_updates), got {grad_updates}")
         self.sketch_config = sketch or SketchConfig()
         self.save_hyperparameters(ignore=["sketch"])
         self.hparams["sketch"] = asdict(self.sketch_config)
@@ -221,7 +227,8 @@ class FlowTTT(L.LightningModule):
         return best
 
     def _step_pair(self, image1, image2, target, weight) -> torch.Tensor:
-        flows = predict_flow(self.raft, image1, image2, self.hparams.train_updates, all_updates=True)
+        flows = predict_flow(self.raft, image1, image2, self.hparams.train_updates, all_updates=True,
+                             grad_updates=self.hparams.grad_updates)  # fmt: skip
         return self._loss(flows, target, weight)
 
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> torch.Tensor:

@@ -14,10 +14,11 @@ from pathlib import Path
 import torch
 import torch.nn.functional as F
 from torchvision.models.optical_flow import RAFT, raft_large, raft_small
+from torchvision.models.optical_flow._utils import make_coords_grid, upsample_flow
 
 from .weights import ARCHS, load_state_dict_file, resolve_weights
 
-__all__ = ["load_raft", "prepare_pair", "predict_flow", "pad_to_multiple"]
+__all__ = ["load_raft", "prepare_pair", "predict_flow", "pad_to_multiple", "truncated_raft"]
 
 
 def load_raft(arch: str = "raft_small", weights: str | Path | None = "C_T_V1") -> RAFT:
@@ -90,15 +91,54 @@ def unpad(flow: torch.Tensor, pad: tuple[int, int, int, int]) -> torch.Tensor:
     return flow[..., top : H - bottom, left : W - right]
 
 
+def truncated_raft(model: RAFT, image1: torch.Tensor, image2: torch.Tensor, updates: int,
+                   grad_updates: int) -> list[torch.Tensor]:  # fmt: skip
+    """RAFT's forward (torchvision's modules, the same iterations) with truncated backpropagation:
+    the first ``updates - grad_updates`` iterations run without gradient, and only the last
+    ``grad_updates`` iterations' flows are upsampled and returned, (B, 2, H, W) px each. Inputs
+    as torchvision's RAFT takes them (see :func:`prepare_pair`). The values equal the forward's."""
+    if not 1 <= grad_updates <= updates:
+        raise ValueError(f"grad_updates: expected 1..{updates} (the training updates), got {grad_updates}")
+    B, _, h, w = image1.shape
+    fmap1, fmap2 = torch.chunk(model.feature_encoder(torch.cat([image1, image2], dim=0)), chunks=2, dim=0)
+    model.corr_block.build_pyramid(fmap1, fmap2)
+    context_out = model.context_encoder(image1)
+    size = model.update_block.hidden_state_size
+    hidden, context = torch.split(context_out, [size, context_out.shape[1] - size], dim=1)
+    hidden, context = torch.tanh(hidden), F.relu(context)
+    coords0 = make_coords_grid(B, h // 8, w // 8).to(fmap1.device)
+    coords1, flows, first = coords0.clone(), [], updates - grad_updates
+    for i in range(updates):
+        with torch.set_grad_enabled(torch.is_grad_enabled() and i >= first):
+            coords1 = coords1.detach()  # as RAFT: no gradient through the coordinates' chain
+            corr = model.corr_block.index_pyramid(centroids_coords=coords1)
+            hidden, delta = model.update_block(hidden, context, corr, coords1 - coords0)
+            coords1 = coords1 + delta
+            if i >= first:
+                mask = None if model.mask_predictor is None else model.mask_predictor(hidden)
+                flows.append(upsample_flow(flow=coords1 - coords0, up_mask=mask))
+    return flows
+
+
 def predict_flow(
-    model: RAFT, image1: torch.Tensor, image2: torch.Tensor, num_flow_updates: int = 32, all_updates: bool = False
+    model: RAFT,
+    image1: torch.Tensor,
+    image2: torch.Tensor,
+    num_flow_updates: int = 32,
+    all_updates: bool = False,
+    grad_updates: int | None = None,
 ) -> torch.Tensor | list[torch.Tensor]:
     """Forward flow image1 -> image2 with ``num_flow_updates`` RAFT iterations: (B, 2, H, W) in
     pixels at the input size (or the list of every update's flow with ``all_updates``).
-    Runs on the model's device; gradients flow when enabled (used for fine-tuning)."""
+    Runs on the model's device; gradients flow when enabled (used for fine-tuning), through the
+    last ``grad_updates`` iterations only when given (:func:`truncated_raft`; ``all_updates``
+    then lists those iterations' flows)."""
     device = next(model.parameters()).device
     a, b, pad = prepare_pair(image1.to(device), image2.to(device))
-    flows = model(a, b, num_flow_updates=num_flow_updates)
+    if grad_updates is None:
+        flows = model(a, b, num_flow_updates=num_flow_updates)
+    else:
+        flows = truncated_raft(model, a, b, num_flow_updates, grad_updates)
     if all_updates:
         return [unpad(f, pad) for f in flows]
     return unpad(flows[-1], pad)
