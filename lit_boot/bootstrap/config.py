@@ -11,8 +11,9 @@ Presets (``BootstrapConfig.preset``):
   450 px tall, as on Human3.6M; never below 2 px), since a fixed 30 px square paints most
   of a small person and the background around it. Everything else as ``paper``.
 
-A user's ``flow`` / ``pose`` dicts (FlowTTT's / the refiner's constructor arguments) override the
-preset, key by key (``sketch`` too: ``{"sketch": {"size": 5}}`` keeps the preset's footprint).
+A user's ``flow`` / ``pose`` dicts (FlowTTT's / the refiner's constructor arguments, typed by
+:mod:`~lit_boot.bootstrap.options`) override the preset, key by key (``sketch`` too:
+``{"sketch": {"size": 5}}`` keeps the preset's footprint).
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from __future__ import annotations
 import copy
 from dataclasses import asdict, dataclass, field
 from typing import Any
+
+from .options import FlowOptions, PoseOptions, check_options
 
 
 __all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "BootstrapConfig"]
@@ -129,13 +132,13 @@ class BootstrapConfig:
     mode: str = "3d"
     preset: str = "default"
     cycles: int = 1
-    flow: dict[str, Any] = field(default_factory=dict)
-    pose: dict[str, Any] = field(default_factory=dict)
+    flow: FlowOptions = field(default_factory=dict)
+    pose: PoseOptions = field(default_factory=dict)
     flow_epochs: int | None = None
     pose_steps: int = 1500
     early_stop: bool = True
     restart_flow: bool = False
-    flow_ensemble: list[dict[str, Any]] = field(default_factory=list)
+    flow_ensemble: list[FlowOptions] = field(default_factory=list)
     pose_ensemble: list[str] = field(default_factory=list)
     accelerator: str = "auto"
     pose_accelerator: str = "cpu"
@@ -159,6 +162,10 @@ class BootstrapConfig:
         for name, allowed in checks:
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name}: expected one of {allowed}, got {getattr(self, name)!r}")
+        check_options("flow", self.flow, FlowOptions)
+        check_options("pose", self.pose, PoseOptions)
+        for i, member in enumerate(self.flow_ensemble):
+            check_options(f"flow_ensemble[{i}]", member, FlowOptions)
         if self.cycles < 0:
             raise ValueError(f"cycles: expected >= 0, got {self.cycles}")
         if self.flow_epochs is not None and self.flow_epochs < 1:
