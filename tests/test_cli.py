@@ -233,3 +233,26 @@ def test_estimate_pose_prints_one_line_without_mediapipe_start_up_noise(shared, 
     assert done.returncode == 0, done.stderr
     assert done.stderr == "" and done.stdout.strip().endswith(f"wrote {tmp_path / 'p.npz'}")
     assert len(done.stdout.strip().splitlines()) == 1
+
+
+def test_the_options_written_out_for_a_fast_help_agree_with_the_library():
+    """bootstrap's --data.* and estimate-pose's options are written out in the CLI (their modules
+    import torch, and --help must not): they must keep the library's names and defaults."""
+    import inspect
+
+    from lit_boot.cli.importing import estimate_pose_parser
+    from lit_boot.cli.runs import bootstrap_parser
+    from lit_boot.data.readers import read_video
+    from lit_boot.estimate.mediapipe_pose import estimate_poses
+
+    def defaults(function, names):
+        params = inspect.signature(function).parameters
+        return {name: params[name].default for name in names}
+
+    data = bootstrap_parser().get_defaults()["data"]
+    video_keys = ("stride", "max_frames", "resize")
+    assert {k: data[k] for k in video_keys} == defaults(read_video, video_keys)
+    estimate = vars(estimate_pose_parser().get_defaults())
+    keys = [k for k in estimate if k in inspect.signature(estimate_poses).parameters and k != "video"]
+    assert {"stride", "max_frames", "resize", "model_complexity", "min_detection_confidence", "on_jump"} <= set(keys)
+    assert {k: estimate[k] for k in keys} == defaults(estimate_poses, keys)
