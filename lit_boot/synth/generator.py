@@ -23,7 +23,7 @@ from .appearance import Appearance
 from .body import Body, PartPoses
 from .bvh import bvh_motion
 from .camera_rig import CameraRig, frame_person
-from .config import MOTION_KINDS, EstimateConfig, SynthConfig
+from .config import EstimateConfig, SynthConfig
 from .estimates import simulate_keypoints, simulate_metro
 from .motions import procedural_motion, procedural_skeleton
 from .render import Hits, cast
