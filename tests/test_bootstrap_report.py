@@ -312,7 +312,8 @@ def test_table_says_units_direction_worse_and_explains_the_metrics() -> None:
 
 def test_table_covers_every_metric_the_history_can_hold() -> None:
     names = ["epe", "epe_person", "epe_background", "epe_joints", "mpjpe_mm", "pa_mpjpe_mm",
-             "accel_mm_per_frame2", "kp2d_px", "agreement_px", "drift_px"]  # fmt: skip
+             "accel_mm_per_frame2", "proj2d_px", "kp2d_px", "agreement_px", "photo_error", "track_error",
+             "drift_px"]  # fmt: skip
     history = [{"stage": "initial", **{k: 2.0 for k in names}}, {"stage": "flow_1", **{k: 1.0 for k in names}}]
     table = report.metrics_table(history)
     rows = table_rows(table)

@@ -47,13 +47,14 @@ def _metric_value(value: object) -> float | None:
 #: Metrics that are not better when lower: a diagnostic, shown without "better" / "worse".
 NEUTRAL_METRICS = ("drift_px",)
 
-#: One legend line per metric family (the metrics of lit_boot.bootstrap.evaluate), in order.
+#: One legend line per metric family (lit_boot.metrics.suite's and lit_boot.bootstrap.evaluate's), in order.
 METRIC_LEGEND = (
     (("epe", "epe_person", "epe_background", "epe_joints"),
      "flow end-point error vs the GT flow over valid, non-occluded pixels: all, on / off the GT "
      "person mask, at the GT joints"),
     (("mpjpe_mm", "pa_mpjpe_mm"), "3D joint error vs GT, root-aligned / after Procrustes alignment"),
     (("accel_mm_per_frame2",), "acceleration error vs GT (jitter)"),
+    (("proj2d_px",), "the 3D joints projected by the cameras vs the GT 2D joints"),
     (("kp2d_px",), "2D keypoint error vs GT"),
     (("agreement_px",),
      "flow-pose agreement: the L_opt residual of the current poses under the current flow "
