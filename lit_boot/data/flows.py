@@ -77,14 +77,17 @@ def check_flows(flows: torch.Tensor, what: str, pairs: int | None, height: int |
 
 
 def _count(found: dict[int, Path], pairs: int | None) -> int:
-    return pairs if pairs is not None else (max(found) + 1 if found else 0)
+    """The expected number of flows: ``pairs``, else as many as the highest pair found says."""
+    return pairs if pairs is not None else max(found) + 1
 
 
 def _read_folder(folder: Path, pairs: int | None, height: int | None, width: int | None) -> torch.Tensor:
     found = {int(m.group(1)): folder / name for name in os.listdir(folder) if (m := _FLO_NAME.match(name))}
+    if not found:
+        raise FlowSourceError(f"{folder}: expected flow_000000.flo, flow_000001.flo, ... (one per frame pair), found none")
     pairs = _count(found, pairs)
     wanted = set(range(pairs))
-    if set(found) != wanted or not found:
+    if set(found) != wanted:
         missing, extra = sorted(wanted - set(found)), sorted(set(found) - wanted)
         detail = []
         if missing:
@@ -93,7 +96,7 @@ def _read_folder(folder: Path, pairs: int | None, height: int | None, width: int
             detail.append(f"unexpected flow_{extra[0]:06d}.flo" + (f" and {len(extra) - 1} more" if len(extra) > 1 else ""))
         raise FlowSourceError(
             f"{folder}: expected {pairs} flows flow_000000.flo .. flow_{max(pairs - 1, 0):06d}.flo "
-            f"(one per pair of the scene's {pairs + 1} frames), found {len(found)}: {', '.join(detail) or 'none'}"
+            f"(one per pair of the scene's {pairs + 1} frames), found {len(found)}: {', '.join(detail)}"
         )
     flows = [read_flo(found[t]) for t in range(pairs)]
     height, width = (height, width) if height is not None else tuple(flows[0].shape[1:])
