@@ -214,8 +214,9 @@ class Bootstrap:
         kept = kept if kept is not None else torch.ones(mean.shape[0], *mean.shape[-2:])
         return record, mean, {"painted": self.models[0].sketch_masks.cpu(), "kept": kept}
 
-    def _pose_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], PoseResult]:
-        """Refine the current poses against the current flows; the record and the result."""
+    def _pose_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], PoseResult, Scene]:
+        """Refine the current poses against the current flows; the record, the result and the
+        scene with the refined poses."""
         cfg = self.config
         what = f"{REFINERS[cfg.mode].__name__}, {cfg.pose_steps} steps on {cfg.pose_accelerator}"
         log.info(stage_header(index, len(cfg.stages()), name, what))
@@ -227,7 +228,7 @@ class Bootstrap:
                   "track_error": pose_track_error(refined.frames, *points),
                   "info": {"steps": result.steps, "stopped_early": result.stopped_early,
                            "loss": result.loss}}  # fmt: skip
-        return record, result
+        return record, result, refined
 
     def _initial_stage(self, st: _RunState) -> None:
         """Pretrained RAFT's flow (the members' mean) and the initial poses' metrics: loaded if
@@ -290,8 +291,8 @@ class Bootstrap:
                 record, flows, decisions = self._flow_stage(name, index, st)
                 scene, result = st.scene, st.result
             else:
-                record, result = self._pose_stage(name, index, st)
-                scene, flows, decisions = result.apply_to(st.scene), st.flows, st.decisions
+                record, result, scene = self._pose_stage(name, index, st)
+                flows, decisions = st.flows, st.decisions
         except NonFiniteError as err:
             return self._roll_back(st, head, start, err)
         record = {**head, **record}
