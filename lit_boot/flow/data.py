@@ -84,6 +84,7 @@ class ScenePairs(Dataset):
 
     def __init__(self, scene: Scene):
         self.scene = scene
+        self.flow_mask = scene.gt.flow_mask() if scene.gt is not None else None  # once, not per pair
 
     def __len__(self) -> int:
         return self.scene.num_frames - 1
@@ -94,7 +95,7 @@ class ScenePairs(Dataset):
         gt = s.gt
         if gt is not None and gt.flow is not None:
             item["gt_flow"] = gt.flow[i].float()
-            item["gt_valid"] = gt.flow_mask()[i]  # valid and not occluded, as the orchestrator scores
+            item["gt_valid"] = self.flow_mask[i]  # valid and not occluded, as the orchestrator scores
         if gt is not None and gt.person_mask is not None:
             item["person"] = gt.person_mask[i]
         if gt is not None and gt.joints2d is not None:
