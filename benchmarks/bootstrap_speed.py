@@ -38,17 +38,24 @@ def main() -> None:
     p.add_argument("--arch", default="raft_small")
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))
     p.add_argument("--precision", default=None, help="Lightning precision of the flow stages (default: the preset's)")
-    p.add_argument("--train-updates", type=int, default=20)
+    p.add_argument("--train-updates", type=int, default=None)
     p.add_argument("--grad-updates", type=int, default=None, help="backpropagate through the last N updates only")
     p.add_argument("--crop-margin", type=int, default=None)
-    p.add_argument("--epochs", type=int, default=8)
+    p.add_argument("--warm-start", action="store_true", help="frozen cached encoders, warm start (train_parts update_block)")
+    p.add_argument("--lr", type=float, default=None)
+    p.add_argument("--mode", default="3d", choices=("3d", "2d"))
+    p.add_argument("--epochs", type=int, default=None, help="per flow stage (default: the mode's, 8 in 3D, 50 in 2D)")
     p.add_argument("--pose-steps", type=int, default=1500)
     args = p.parse_args()
     scene = make_scene(motion="run", frames=args.frames, height=args.height, width=args.width, seed=0)
-    flow = {"arch": args.arch, "weights": args.weights, "train_updates": args.train_updates, "crop_margin": args.crop_margin,
-            "grad_updates": args.grad_updates}  # fmt: skip
+    flow = {"arch": args.arch, "weights": args.weights}
+    given = {"train_updates": args.train_updates, "grad_updates": args.grad_updates, "crop_margin": args.crop_margin,
+             "lr": args.lr}  # fmt: skip
+    flow.update({k: v for k, v in given.items() if v is not None})
+    if args.warm_start:
+        flow.update(warm_start=True, train_parts="update_block")
     with tempfile.TemporaryDirectory() as tmp:
-        result = bootstrap(scene, Path(tmp) / "run", flow=flow, flow_epochs=args.epochs, pose_steps=args.pose_steps,
+        result = bootstrap(scene, Path(tmp) / "run", flow=flow, mode=args.mode, flow_epochs=args.epochs, pose_steps=args.pose_steps,
                            precision=args.precision, progress_bar=False, video=False)  # fmt: skip
     cuda = torch.cuda.is_available()
     speed = speed_summary(result)

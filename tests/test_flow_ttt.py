@@ -173,11 +173,15 @@ def test_flow_writer_npz_and_overwrite_protection(scene, tmp_path):
 def test_person_region_is_the_sketch_dilated_by_the_margin():
     masks = torch.zeros(2, 20, 30, dtype=torch.bool)
     masks[0, 10, 15] = True  # frame 1 has no sketch: no person region
-    region = FlowTTT(weights=None, crop_margin=3, **FAST).person_region(masks)
+    region = FlowTTT(weights=None, **FAST).person_region(masks, margin=3)
     assert region.shape == masks.shape and region.dtype == torch.bool
     assert region[0].sum() == 7 * 7 and region[0, 7:14, 12:19].all()
     assert not region[1].any()
     assert FlowTTT(weights=None, **FAST).person_region(masks, margin=1)[0].sum() == 9
+    corner = torch.zeros(1, 40, 40, dtype=torch.bool)
+    corner[0, 0, 0] = True  # the default margin, 16 px whatever the crop, cut at the frame's border
+    region = FlowTTT(weights=None, crop_margin=3, **FAST).person_region(corner)
+    assert region.sum() == 17 * 17 and region[0, :17, :17].all()
 
 
 def test_nothing_painted_skips_training_and_keeps_the_flow(scene, tmp_path):

@@ -53,6 +53,7 @@ class FlowOptions(TypedDict, total=False):
     freeze_batchnorm: bool
     crop_margin: int | None
     hold_weight: float
+    warm_start: bool
     sketch: SketchOptions
 
 

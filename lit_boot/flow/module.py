@@ -18,7 +18,6 @@ from dataclasses import asdict
 import lightning as L
 import torch
 import torch.nn.functional as F
-from kornia.morphology import dilation
 from lightning.pytorch.utilities import rank_zero_warn
 
 from ..finite import FiniteGuard
@@ -26,11 +25,14 @@ from ..metrics import EndPointError, FlowMetrics
 from .gate import gate_sketch
 from .raft import load_raft, predict_flow
 from .sketch import SketchConfig, sketch_from_layout, target_flow
+from .warm import FeatureCache, box_region, crop_box, paste
 
 __all__ = ["FlowTTT"]
 
 LOSSES = ("final", "sequence")
 TRAIN_PARTS = ("all", "update_block")
+#: px around the sketch that count as the person (:meth:`FlowTTT.person_region`).
+PERSON_MARGIN = 16
 
 
 class FlowTTT(L.LightningModule):
@@ -58,9 +60,17 @@ class FlowTTT(L.LightningModule):
         train_parts: all (the paper) or update_block (update block and mask predictor only).
         freeze_batchnorm: keep BatchNorm statistics fixed (the paper does not).
         crop_margin: train on a crop around the sketch (its bounding box plus this margin, px)
-            while predicting on full frames; None trains on full frames.
+            while predicting on full frames; None trains on full frames. With ``warm_start``
+            the crop is of the cached feature maps, and predictions too are made on it and pasted
+            into the untuned flow (outside it the output is the untuned flow).
         hold_weight: in crop mode, weight of a second crop elsewhere in the frame whose target is
-            the base flow, which holds the unseen rest of the frame in place (0: off).
+            the base flow, which holds the unseen rest of the frame in place (0: off; not used
+            with ``warm_start``, whose output outside the crop is the untuned flow).
+        warm_start: the fast fine-tune (:mod:`lit_boot.flow.warm`; needs
+            ``train_parts="update_block"``): the frozen encoders' outputs and the untuned flow
+            (``predict_updates`` iterations, also the target's base flow) are computed once per
+            scene; training steps and predictions run ``train_updates`` iterations from that
+            flow. A prediction on other frames than the fit's runs from zero.
         sketch: how the stick-man is drawn and guarded.
     """
 
@@ -81,6 +91,7 @@ class FlowTTT(L.LightningModule):
         freeze_batchnorm: bool = False,
         crop_margin: int | None = None,
         hold_weight: float = 1.0,
+        warm_start: bool = False,
         sketch: SketchConfig | None = None,
     ):
         super().__init__()
@@ -90,6 +101,8 @@ class FlowTTT(L.LightningModule):
             raise ValueError(f"train_parts: expected one of {TRAIN_PARTS}, got {train_parts!r}")
         if grad_updates is not None and not 1 <= grad_updates <= train_updates:
             raise ValueError(f"grad_updates: expected None or 1..{train_updates} (train_updates), got {grad_updates}")
+        if warm_start and train_parts != "update_block":
+            raise ValueError(f"warm_start: needs train_parts='update_block' (frozen, cached encoders), got {train_parts!r}")
         self.sketch_config = sketch or SketchConfig()
         self.save_hyperparameters(ignore=["sketch"])
         self.hparams["sketch"] = asdict(self.sketch_config)
@@ -101,6 +114,10 @@ class FlowTTT(L.LightningModule):
         self.sketch_masks: torch.Tensor | None = None  # (P, H, W)
         self.original: torch.Tensor | None = None  # (P, 2, H, W): the untuned network's prediction
         self.target_report: dict[str, float] = {}
+        self.cache: FeatureCache | None = None  # warm_start: the scene's encoder outputs and untuned flow
+        self.boxes: list[tuple[int, int, int, int] | None] | None = None  # warm_start: each pair's crop
+        self._untuned = self._trainable_state() if warm_start else None  # the cache's network
+        self._prediction = "plain"  # set per predict / validation run (see _source)
         self.val_metrics = FlowMetrics(prefix="val/")  # lit_boot.metrics.suite: the one convention
         self.val_drift = EndPointError()
 
@@ -121,7 +138,10 @@ class FlowTTT(L.LightningModule):
         sketch's gate needs them ("photometric+fb"; one more pass per pair), else None."""
         loader = datamodule.predict_dataloader()
         updates = self.hparams.target_updates or self.hparams.train_updates
-        base = self._predict_all(loader, updates)
+        if self.hparams.warm_start:
+            base, updates = self.warm_cache(datamodule.scene.frames).base, self.hparams.predict_updates
+        else:
+            base = self._predict_all(loader, updates)
         if self.sketch_config.gate != "photometric+fb":
             return base, None
         return base, self._predict_all(loader, updates, backward=True)
@@ -162,8 +182,55 @@ class FlowTTT(L.LightningModule):
 
     def forget_targets(self) -> None:
         """Drop the targets, sketches and untuned flows, so that the next fit rebuilds them from
-        its datamodule's poses (the orchestrator's next flow stage, after the poses changed)."""
-        self.targets = self.sketch_masks = self.original = None
+        its datamodule's poses (the orchestrator's next flow stage, after the poses changed).
+        The warm start's cache stays: the encoders are frozen and the untuned flow is the untuned
+        network's."""
+        self.targets = self.sketch_masks = self.original = self.boxes = None
+
+    # --- the warm start (lit_boot.flow.warm) ------------------------------------------------------
+    def _trainable_state(self) -> dict[str, torch.Tensor]:
+        return {k: v.detach().clone() for k, v in self.raft.state_dict().items()
+                if k.startswith(("update_block.", "mask_predictor."))}  # fmt: skip
+
+    def warm_cache(self, frames: torch.Tensor) -> FeatureCache:
+        """The feature cache of ``frames`` (T, 3, H, W), built with the untuned update block
+        (the weights this module was made with) unless the one held fits."""
+        if self.cache is None or not self.cache.fits(frames):
+            tuned = self._trainable_state()
+            self.raft.load_state_dict(self._untuned, strict=False)
+            try:
+                self.cache = FeatureCache.build(self.raft, frames, self.hparams.predict_updates)
+            finally:
+                self.raft.load_state_dict(tuned, strict=False)
+        return self.cache
+
+    def _source(self) -> str:
+        """How this predict or validation run predicts: "warm" (after a fit, on the fit's
+        frames), "cache" (warm_start, untuned: the cache's base flow, which is RAFT's own
+        prediction, built now if needed), else "plain" (``predict_updates`` from zero)."""
+        dm = self.trainer.datamodule if self._trainer is not None else None
+        if not self.hparams.warm_start or dm is None:
+            return "plain"
+        if self.boxes is not None and self.cache is not None and self.cache.fits(dm.scene.frames):
+            return "warm"
+        state = self._trainable_state()
+        if all(torch.equal(state[k], self._untuned[k].to(state[k].device)) for k in state):
+            self.warm_cache(dm.scene.frames)  # RAFT's own flow, keeping the encoders' outputs for the fit
+            return "cache"
+        return "plain"
+
+    def on_predict_start(self) -> None:
+        self._prediction = self._source()
+
+    def on_validation_start(self) -> None:
+        self._prediction = self._source()
+
+    def _warm_flows(self, index: torch.Tensor, grad: bool) -> list[torch.Tensor | None]:
+        """Per pair of ``index``: the last training iterations' flows on its box (None: no box)."""
+        hp = self.hparams
+        return [None if self.boxes[i] is None else
+                self.cache.flows(self.raft, int(i), self.boxes[i], hp.train_updates, hp.grad_updates if grad else 1)
+                for i in index.tolist()]  # fmt: skip
 
     def on_fit_start(self) -> None:
         dm = self.trainer.datamodule
@@ -179,6 +246,13 @@ class FlowTTT(L.LightningModule):
                     "training skipped, the flow stays as it is"
                 )
                 self.trainer.should_stop = True
+        if self.hparams.warm_start and self.sketch_masks is not None:
+            cache = self.warm_cache(dm.scene.frames)
+            margin = self.hparams.crop_margin
+            # with a margin, a pair with nothing painted has no box (its flow stays the untuned one)
+            self.boxes = [crop_box(m, margin, cache.pad, cache.cells) for m in self.sketch_masks.cpu()]
+            if self.original is None:
+                self.original = cache.base
         if self.original is None and dm is not None and self.trainer.limit_val_batches:
             self.original = self._predict_all(dm.val_dataloader(), self.hparams.predict_updates)
 
@@ -236,7 +310,11 @@ class FlowTTT(L.LightningModule):
         target = self.targets[idx].to(self.device)
         mask = self.sketch_masks[idx].to(self.device)
         weight = 1.0 + (self.hparams.sketch_weight - 1.0) * mask.float()
-        if self.hparams.crop_margin is None:
+        if self.hparams.warm_start:
+            loss = self._warm_loss(idx, target, weight)
+            if loss is None:  # no pair of the batch has a box: nothing to learn here
+                return None
+        elif self.hparams.crop_margin is None:
             loss = self._step_pair(batch["image1"], batch["image2"], target, weight)
         else:
             losses = []
@@ -254,6 +332,17 @@ class FlowTTT(L.LightningModule):
         self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(idx))
         return loss
 
+    def _warm_loss(self, idx: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor | None:
+        """Mean over the batch's pairs with a box of the loss on the box (None if none has one)."""
+        losses = []
+        for b, flows in enumerate(self._warm_flows(idx, grad=True)):
+            if flows is not None:
+                (fy0, fy1, fx0, fx1), (by0, by1, bx0, bx1) = box_region(self.boxes[int(idx[b])], self.cache.pad,
+                                                                        target.shape[-2:])  # fmt: skip
+                region = [f[..., by0:by1, bx0:bx1] for f in flows]
+                losses.append(self._loss(region, target[b : b + 1, :, fy0:fy1, fx0:fx1], weight[b : b + 1, fy0:fy1, fx0:fx1]))
+        return sum(losses) / len(losses) if losses else None
+
     def configure_callbacks(self) -> list[L.Callback]:
         return [FiniteGuard()]
 
@@ -263,7 +352,14 @@ class FlowTTT(L.LightningModule):
 
     # --- validation and prediction ----------------------------------------------------------------
     def _predict(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
-        return predict_flow(self.raft, batch["image1"], batch["image2"], self.hparams.predict_updates).float()
+        source, idx = getattr(self, "_prediction", "plain"), batch["index"].cpu()
+        if source == "cache":
+            return self.cache.base[idx].to(self.device)
+        if source != "warm":
+            return predict_flow(self.raft, batch["image1"], batch["image2"], self.hparams.predict_updates).float()
+        out = [self.cache.base[i] if flows is None else paste(self.cache.base[i], flows[-1].float().cpu(), self.boxes[i], self.cache.pad)
+               for i, flows in zip(idx.tolist(), self._warm_flows(idx, grad=False))]  # fmt: skip
+        return torch.stack(out).to(self.device)
 
     def validation_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
         flow = self._predict(batch)
@@ -275,11 +371,11 @@ class FlowTTT(L.LightningModule):
             self.val_drift.update(flow, self.original[idx].to(self.device), outside)
 
     def person_region(self, sketch_masks: torch.Tensor, margin: int | None = None) -> torch.Tensor:
-        """The sketch dilated by ``margin`` px (default: the crop margin, else 16) (B, H, W)
-        bool: 'the person' without ground truth."""
-        r = margin if margin is not None else (self.hparams.crop_margin or 16)
-        square = torch.ones(2 * r + 1, 2 * r + 1, device=sketch_masks.device)
-        return dilation(sketch_masks[:, None].float(), square)[:, 0] > 0
+        """The sketch dilated by ``margin`` px (default :data:`PERSON_MARGIN`) (B, H, W) bool:
+        'the person' without ground truth (the drift's complement, the self-check's person)."""
+        r = margin if margin is not None else PERSON_MARGIN
+        # a flat square's dilation is a max filter (kornia's dilation is ~100x slower at r = 16)
+        return F.max_pool2d(sketch_masks[:, None].float(), 2 * r + 1, stride=1, padding=r)[:, 0] > 0
 
     def on_validation_epoch_end(self) -> None:
         metrics = self.val_metrics.compute()

@@ -18,7 +18,8 @@ from torchvision.models.optical_flow._utils import make_coords_grid, upsample_fl
 
 from .weights import ARCHS, load_state_dict_file, resolve_weights
 
-__all__ = ["load_raft", "prepare_pair", "predict_flow", "pad_to_multiple", "truncated_raft"]
+__all__ = ["load_raft", "prepare_pair", "predict_flow", "pad_to_multiple", "truncated_raft", "encode_frames",
+           "context_state", "run_updates", "to_unit_range"]
 
 
 def load_raft(arch: str = "raft_small", weights: str | Path | None = "C_T_V1") -> RAFT:
@@ -59,7 +60,9 @@ def pad_to_multiple(
     return F.pad(images, pad, mode="replicate"), pad
 
 
-def _to_unit_range(images: torch.Tensor, name: str) -> torch.Tensor:
+def to_unit_range(images: torch.Tensor, name: str) -> torch.Tensor:
+    """RGB (3, H, W) or (B, 3, H, W), uint8 0..255 or float 0..1, as RAFT takes it: (B, 3, H, W)
+    in [-1, 1]. ``name`` names the argument in errors."""
     if images.ndim == 3:
         images = images[None]
     if images.ndim != 4 or images.shape[1] != 3:
@@ -76,7 +79,7 @@ def prepare_pair(
 ) -> tuple[torch.Tensor, torch.Tensor, tuple[int, int, int, int]]:
     """RAFT inputs from two batches of RGB images: uint8 0..255 or float 0..1, (B, 3, H, W) or
     (3, H, W) -> [-1, 1], padded to multiples of 8; returns them and the padding."""
-    a, b = _to_unit_range(image1, "image1"), _to_unit_range(image2, "image2")
+    a, b = to_unit_range(image1, "image1"), to_unit_range(image2, "image2")
     if a.shape != b.shape:
         raise ValueError(f"image1 and image2: shapes differ, {tuple(a.shape)} vs {tuple(b.shape)}")
     a, pad = pad_to_multiple(a)
@@ -91,23 +94,40 @@ def unpad(flow: torch.Tensor, pad: tuple[int, int, int, int]) -> torch.Tensor:
     return flow[..., top : H - bottom, left : W - right]
 
 
-def truncated_raft(model: RAFT, image1: torch.Tensor, image2: torch.Tensor, updates: int,
-                   grad_updates: int) -> list[torch.Tensor]:  # fmt: skip
-    """RAFT's forward (torchvision's modules, the same iterations) with truncated backpropagation:
-    the first ``updates - grad_updates`` iterations run without gradient, and only the last
-    ``grad_updates`` iterations' flows are upsampled and returned, (B, 2, H, W) px each. Inputs
-    as torchvision's RAFT takes them (see :func:`prepare_pair`). The values equal the forward's."""
-    if not 1 <= grad_updates <= updates:
-        raise ValueError(f"grad_updates: expected 1..{updates} (the training updates), got {grad_updates}")
-    B, _, h, w = image1.shape
-    fmap1, fmap2 = torch.chunk(model.feature_encoder(torch.cat([image1, image2], dim=0)), chunks=2, dim=0)
-    model.corr_block.build_pyramid(fmap1, fmap2)
-    context_out = model.context_encoder(image1)
+def encode_frames(model: RAFT, images: torch.Tensor) -> torch.Tensor:
+    """RAFT's feature maps (B, C, h, w) at 1/8 resolution of prepared images (B, 3, 8h, 8w).
+    The encoder normalises each image on its own, so a frame's map is the same in every pair."""
+    return model.feature_encoder(images)
+
+
+def context_state(model: RAFT, image1: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """RAFT's initial hidden state and context features (B, C, h, w) of prepared first frames."""
+    out = model.context_encoder(image1)
     size = model.update_block.hidden_state_size
-    hidden, context = torch.split(context_out, [size, context_out.shape[1] - size], dim=1)
-    hidden, context = torch.tanh(hidden), F.relu(context)
-    coords0 = make_coords_grid(B, h // 8, w // 8).to(fmap1.device)
-    coords1, flows, first = coords0.clone(), [], updates - grad_updates
+    hidden, context = torch.split(out, [size, out.shape[1] - size], dim=1)
+    return torch.tanh(hidden), F.relu(context)
+
+
+def run_updates(
+    model: RAFT,
+    fmap1: torch.Tensor,
+    fmap2: torch.Tensor,
+    hidden: torch.Tensor,
+    context: torch.Tensor,
+    flow8: torch.Tensor | None,
+    updates: int,
+    grad_updates: int | None = None,
+) -> tuple[list[torch.Tensor], torch.Tensor]:
+    """RAFT's update iterations (torchvision's modules) over encoded inputs (B, C, h, w), from the
+    1/8-resolution flow ``flow8`` (B, 2, h, w) in 1/8 px (None: zero, RAFT's own start; a flow:
+    a warm start). Gradients (when enabled) go through the last ``grad_updates`` iterations only
+    (None: all, as torchvision). Returns the flows (B, 2, 8h, 8w) px of those iterations,
+    upsampled, and the last iteration's 1/8-resolution flow (detached)."""
+    B, _, h, w = fmap1.shape
+    model.corr_block.build_pyramid(fmap1, fmap2)
+    coords0 = make_coords_grid(B, h, w).to(fmap1.device)
+    coords1 = coords0.clone() if flow8 is None else coords0 + flow8.to(coords0)
+    flows, first = [], 0 if grad_updates is None else updates - grad_updates
     for i in range(updates):
         with torch.set_grad_enabled(torch.is_grad_enabled() and i >= first):
             coords1 = coords1.detach()  # as RAFT: no gradient through the coordinates' chain
@@ -117,7 +137,20 @@ def truncated_raft(model: RAFT, image1: torch.Tensor, image2: torch.Tensor, upda
             if i >= first:
                 mask = None if model.mask_predictor is None else model.mask_predictor(hidden)
                 flows.append(upsample_flow(flow=coords1 - coords0, up_mask=mask))
-    return flows
+    return flows, (coords1 - coords0).detach()
+
+
+def truncated_raft(model: RAFT, image1: torch.Tensor, image2: torch.Tensor, updates: int,
+                   grad_updates: int) -> list[torch.Tensor]:  # fmt: skip
+    """RAFT's forward (torchvision's modules, the same iterations) with truncated backpropagation:
+    the first ``updates - grad_updates`` iterations run without gradient, and only the last
+    ``grad_updates`` iterations' flows are upsampled and returned, (B, 2, H, W) px each. Inputs
+    as torchvision's RAFT takes them (see :func:`prepare_pair`). The values equal the forward's."""
+    if not 1 <= grad_updates <= updates:
+        raise ValueError(f"grad_updates: expected 1..{updates} (the training updates), got {grad_updates}")
+    fmap1, fmap2 = torch.chunk(encode_frames(model, torch.cat([image1, image2], dim=0)), chunks=2, dim=0)
+    hidden, context = context_state(model, image1)
+    return run_updates(model, fmap1, fmap2, hidden, context, None, updates, grad_updates)[0]
 
 
 def predict_flow(

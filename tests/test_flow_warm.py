@@ -1,0 +1,122 @@
+"""The fast fine-tune (lit_boot.flow.warm): cached features, warm start, crops (tiny scenes, CPU)."""
+
+from __future__ import annotations
+
+import lightning as L
+import pytest
+import torch
+
+from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig, predict_flow
+from lit_boot.flow.raft import load_raft
+from lit_boot.flow.warm import MIN_CELLS, FeatureCache, box_region, crop_box, paste
+from lit_boot.synth import make_scene
+
+WARM = dict(weights=None, train_parts="update_block", warm_start=True, train_updates=2, predict_updates=3,
+            sketch=SketchConfig(size=3, guard=False))  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_scene(motion="run", frames=3, height=64, width=96, seed=0)
+
+
+def trainer(tmp_path, epochs=1) -> L.Trainer:
+    return L.Trainer(max_epochs=epochs, default_root_dir=tmp_path, logger=False, enable_checkpointing=False,
+                     enable_progress_bar=False, enable_model_summary=False, num_sanity_val_steps=0,
+                     limit_val_batches=0)  # fmt: skip
+
+
+def test_the_cache_holds_each_frames_features_once_and_rafts_own_flow(scene):
+    torch.manual_seed(0)
+    model = load_raft("raft_small", None).eval()
+    cache = FeatureCache.build(model, scene.frames, updates=3)
+    T = scene.num_frames
+    assert cache.fmaps.shape[0] == T and cache.hidden.shape[0] == cache.flow8.shape[0] == T - 1
+    assert cache.cells == (16, 16) and cache.pad == (16, 16, 32, 32)  # 64x96 padded to 128x128
+    with torch.no_grad():
+        own = torch.cat([predict_flow(model, scene.frames[t], scene.frames[t + 1], 3) for t in range(T - 1)])
+    torch.testing.assert_close(cache.base, own, rtol=1e-4, atol=1e-4)
+    assert cache.fits(scene.frames) and cache.fits(scene.frames.clone())
+    assert not cache.fits(scene.frames.flip(0))
+
+
+@pytest.mark.parametrize("margin", [0, 5, 24])
+def test_a_crop_box_covers_the_mask_plus_margin_inside_the_grid(margin):
+    pad, cells, size = (16, 16, 32, 32), (16, 32), (64, 224)  # a 64x224 frame padded to 128x256
+    mask = torch.zeros(size, dtype=torch.bool)
+    mask[10:30, 150:170] = True
+    box = crop_box(mask, margin, pad, cells)
+    y0, y1, x0, x1 = box
+    assert 0 <= y0 < y1 <= cells[0] and 0 <= x0 < x1 <= cells[1]
+    assert y1 - y0 >= MIN_CELLS and x1 - x0 >= MIN_CELLS  # torchvision's correlation pyramid needs 16
+    (fy0, fy1, fx0, fx1), inner = box_region(box, pad, size)
+    assert fy0 <= max(0, 10 - margin) and fy1 >= min(64, 30 + margin)
+    assert fx0 <= 150 - margin and fx1 >= 170 + margin
+    assert inner[1] - inner[0] == fy1 - fy0 and inner[3] - inner[2] == fx1 - fx0
+    assert x1 - x0 < cells[1]  # a crop, not the frame
+    assert crop_box(torch.zeros(size, dtype=torch.bool), margin, pad, cells) is None
+    assert crop_box(mask, None, pad, cells) == (0, cells[0], 0, cells[1])
+
+
+def test_paste_changes_only_the_boxs_region():
+    pad, size, box = (0, 0, 0, 0), (128, 256), (0, 16, 8, 24)
+    base, flow = torch.zeros(2, *size), torch.ones(1, 2, 128, 128)
+    out = paste(base, flow, box, pad)
+    assert out[:, :, 64:192].eq(1).all() and out[:, :, :64].eq(0).all() and out[:, :, 192:].eq(0).all()
+    assert base.eq(0).all()  # the input is left alone
+
+
+def test_warm_start_needs_frozen_encoders():
+    with pytest.raises(ValueError, match="warm_start: needs train_parts='update_block'"):
+        FlowTTT(weights=None, warm_start=True)
+
+
+def test_warm_fine_tune_follows_the_target_on_the_crop_and_keeps_the_untuned_flow_outside(shared, tmp_path):
+    torch.manual_seed(0)
+    wide = make_scene(motion="run", frames=3, height=96, width=256, seed=0)  # the crop is narrower than the frame
+    model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0)
+    data = SceneFlowData(wide, pose_source="gt", shuffle=False)
+    untuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])  # RAFT's own flow: builds the cache
+    cache = model.cache
+    assert cache is not None
+    torch.testing.assert_close(untuned, cache.base)
+    encoders = {k: v.clone() for k, v in model.raft.state_dict().items() if k.startswith(("feature_encoder", "context_encoder"))}
+    trainer(tmp_path, epochs=3).fit(model, datamodule=data)
+    assert model.cache is cache  # built once: the initial prediction's features are reused
+    assert all(torch.equal(v, model.raft.state_dict()[k]) for k, v in encoders.items())
+    torch.testing.assert_close(model.targets[~model.sketch_masks[:, None].expand_as(untuned)],
+                               untuned[~model.sketch_masks[:, None].expand_as(untuned)])  # painted over it  # fmt: skip
+    tuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])
+    painted = model.sketch_masks[:, None].expand_as(tuned)
+    before = (untuned - model.targets).abs()[painted].mean()
+    after = (tuned - model.targets).abs()[painted].mean()
+    assert after < 0.95 * before  # measured: 0.88
+    for i, box in enumerate(model.boxes):  # outside its box a pair's flow is the untuned one, exactly
+        (fy0, fy1, fx0, fx1), _ = box_region(box, cache.pad, tuned.shape[-2:])
+        outside = torch.ones(tuned.shape[-2:], dtype=torch.bool)
+        outside[fy0:fy1, fx0:fx1] = False
+        assert outside.any()
+        assert torch.equal(tuned[i][:, outside], untuned[i][:, outside])
+
+
+def test_the_cache_is_built_with_the_untuned_network_after_resuming_tuned_weights(scene):
+    torch.manual_seed(0)
+    model = FlowTTT(**WARM)
+    own = FeatureCache.build(model.raft, scene.frames, updates=3).base
+    with torch.no_grad():  # as a resumed run loads a tuned update block before building the cache
+        for p in model.raft.update_block.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    tuned = model.raft.update_block.state_dict()
+    torch.testing.assert_close(model.warm_cache(scene.frames).base, own)
+    assert all(torch.equal(v, model.raft.update_block.state_dict()[k]) for k, v in tuned.items())  # restored
+
+
+def test_after_a_fit_other_frames_are_predicted_from_zero(scene, tmp_path):
+    torch.manual_seed(0)
+    model = FlowTTT(lr=1e-3, **WARM)
+    trainer(tmp_path).fit(model, datamodule=SceneFlowData(scene, pose_source="gt"))
+    other = make_scene(motion="walk", frames=2, height=64, width=96, seed=1)
+    flow = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=SceneFlowData(other, shuffle=False))])
+    with torch.no_grad():
+        plain = predict_flow(model.raft.eval(), other.frames[0], other.frames[1], 3)
+    torch.testing.assert_close(flow, plain)
