@@ -242,3 +242,15 @@ def test_raft_forward_backward_finds_the_synthetic_occlusions(shared, kwargs):
     precision, recall = hits / max(flagged.sum().item(), 1), hits / occluded.sum().item()
     assert precision > 4 * occluded.float().mean().item()
     assert recall > 4 * flagged.float().mean().item()
+
+
+@pytest.mark.parametrize("measure", ["census", "ssim"])
+@pytest.mark.parametrize("box", [(8, 40, 16, 60), (0, 24, 0, 30), (40, 64, 70, 96)])  # inside, at corners
+def test_a_box_is_measured_as_the_whole_frame_there(scene, measure, box):
+    frames, flow = scene.frames[:2], scene.gt.flow[:1]
+    whole, valid = photometric_error(frames[:1], frames[1:], flow, measure)
+    part, part_valid = photometric_error(frames[:1], frames[1:], flow, measure, box=box)
+    y0, y1, x0, x1 = box
+    assert part.shape == (1, y1 - y0, x1 - x0)
+    torch.testing.assert_close(part, whole[:, y0:y1, x0:x1])
+    assert torch.equal(part_valid, valid[:, y0:y1, x0:x1])

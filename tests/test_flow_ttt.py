@@ -194,3 +194,19 @@ def test_nothing_painted_skips_training_and_keeps_the_flow(scene, tmp_path):
         fit.fit(model, datamodule=SceneFlowData(nobody, pose_source="keypoints2d"))
     assert fit.global_step == 0 and model.target_report["target/painted_fraction"] == 0.0
     assert all(torch.equal(before[k], v) for k, v in model.raft.state_dict().items())
+
+
+def test_plateau_stop_ends_a_fit_whose_loss_stopped_falling(scene, tmp_path):
+    data = SceneFlowData(scene, pose_source="gt")
+    still = FlowTTT(weights=None, lr=0.0, plateau_patience=2, **FAST)  # lr 0: the loss never falls
+    t = trainer(tmp_path, epochs=10, limit_val_batches=0)
+    t.fit(still, datamodule=data)
+    assert t.current_epoch == 3  # the first epoch sets the best; two more without a fall stop it
+    assert t.callback_metrics["train/loss_rel"] == pytest.approx(1.0)
+    torch.manual_seed(0)
+    learning = FlowTTT(weights=None, lr=1e-3, plateau_patience=2, plateau_delta=0.0, **FAST)
+    t = trainer(tmp_path, epochs=4, limit_val_batches=0)
+    t.fit(learning, datamodule=data)
+    assert t.current_epoch == 4 and t.callback_metrics["train/loss_rel"] < 1.0  # still falling: runs on
+    with pytest.raises(ValueError, match="plateau_patience: expected None or >= 1"):
+        FlowTTT(weights=None, plateau_patience=0)

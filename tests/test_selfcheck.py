@@ -14,7 +14,8 @@ import lit_boot
 from lit_boot.bootstrap import Bootstrap, BootstrapConfig, bootstrap
 from lit_boot.bootstrap import runner as runner_module
 from lit_boot.bootstrap.decisions import DECISION_COLOURS, decision_image, load_decisions
-from lit_boot.bootstrap.selfcheck import blend_weights, choose_regions, region_labels, region_names, self_check
+from lit_boot.bootstrap.selfcheck import (blend_weights, changed_box, choose_pixels, choose_regions, region_labels,
+                                         region_names, self_check)
 from lit_boot.flow.evidence import photometric_error
 
 TILE = 32
@@ -215,3 +216,28 @@ def test_a_tile_gain_within_the_noise_keeps_the_initial_flow():
     assert won.tolist() == [False, True]  # the noisy gain is not clear of its standard error
     won, *_ = choose_regions(initial, tuned, valid, labels, 2, margin=0.02, z=0.0)
     assert won.tolist() == [True, True]
+
+
+def test_only_the_tiles_where_the_flows_differ_are_measured_and_the_decisions_are_the_whole_frames():
+    scene = lit_boot.make_scene(motion="run", frames=3, height=96, width=160, seed=3)
+    gt, frames = scene.gt.flow.float(), scene.frames
+    person = scene.gt.person_mask[:-1]
+    initial = gt + torch.tensor([0.7, -0.4]).view(1, 2, 1, 1)  # RAFT off everywhere
+    tuned = initial.clone()
+    tuned[0, :, 20:70, 40:100] = gt[0, :, 20:70, 40:100]  # pair 0: exact in one part; pair 1: unchanged
+    flows, record, weight = self_check(frames, initial, tuned, person, tile=TILE, window=5, blend=1)
+    labels, count = region_labels(person, TILE), 2 * 3 * 5
+    choices = []
+    for t in range(2):  # the same decisions measured over the whole frame
+        pair = frames[t : t + 1], frames[t + 1 : t + 2]
+        err_i, valid_i = photometric_error(*pair, initial[t : t + 1])
+        err_t, valid_t = photometric_error(*pair, tuned[t : t + 1])
+        err_i, err_t, valid = err_i[0], err_t[0], (valid_i & valid_t)[0]
+        won = choose_regions(err_i, err_t, valid & ~person[t], labels[t], count, 0.02, 1.0)[0]
+        on_person = choose_pixels(err_i, err_t, valid, person[t], 5, 0.02)
+        choices.append(torch.where(person[t], on_person, won[labels[t]]))
+    assert torch.equal(weight, blend_weights(torch.stack(choices), 1))
+    assert weight[0].sum() > 0 and not weight[1].any()
+    assert changed_box(initial[0], tuned[0], TILE, 6) == (0, 96, 32, 128)  # rows 14..76, cols 34..106: out to tiles
+    assert changed_box(initial[1], tuned[1], TILE, 6) is None
+    assert record["per_pair"][1]["regions"] == {} and 0 < len(record["per_pair"][0]["regions"]) < 15

@@ -54,6 +54,8 @@ class FlowOptions(TypedDict, total=False):
     crop_margin: int | None
     hold_weight: float
     warm_start: bool
+    plateau_patience: int | None
+    plateau_delta: float
     sketch: SketchOptions
 
 

@@ -24,6 +24,7 @@ one of the two flows.
 - :func:`choose_regions`: the per-region decision from two error maps.
 - :func:`choose_pixels`: the per-pixel decision on the person.
 - :func:`blend_weights`: the smooth weight map from the binary choice.
+- :func:`changed_box`: the tiles around where the two flows differ, the only ones measured.
 - :func:`self_check`: all of it on a stage's flows; the checked flows, the record, the weights.
 - :func:`check_stage`: what the runner calls after a flow stage; :func:`summary_line` for the console.
 """
@@ -40,13 +41,15 @@ from torch import Tensor
 from ..flow.evidence import photometric_error
 from .config import SELF_CHECKS
 
-__all__ = ["SELF_CHECKS", "region_labels", "region_names", "choose_regions", "choose_pixels", "blend_weights",
+__all__ = ["SELF_CHECKS", "region_labels", "region_names", "choose_regions", "choose_pixels", "blend_weights", "changed_box",
            "self_check", "check_stage", "summary_line"]
 
 #: Regions with fewer valid pixels than this keep the initial flow (too little evidence).
 MIN_PIXELS = 16
 #: Pixels per independent sample of the census error: a 7x7 window's neighbours share most of it.
 CENSUS_PIXELS = 49
+#: The census window's radius (7x7).
+CENSUS_RADIUS = 3
 
 
 def region_labels(person: Tensor, tile: int) -> Tensor:
@@ -138,6 +141,21 @@ def blend_weights(choice: Tensor, blend: int) -> Tensor:
     return torch.where(smooth > 1 - 1e-5, 1.0, torch.where(smooth < 1e-5, 0.0, smooth))
 
 
+def changed_box(initial: Tensor, tuned: Tensor, tile: int, reach: int) -> tuple[int, int, int, int] | None:
+    """Where two flows (2, H, W) of a pair differ, widened by ``reach`` px (how far a flow's
+    change moves a pixel's error and its window average) and out to whole tiles: (y0, y1, x0,
+    x1) px, or None where they are equal. Outside it both flows score alike, so the initial
+    flow stays there whatever is measured."""
+    ys, xs = torch.nonzero((initial != tuned).any(0), as_tuple=True)
+    if ys.numel() == 0:
+        return None
+    height, width = initial.shape[-2:]
+    y0, x0 = max(0, int(ys.min()) - reach) // tile * tile, max(0, int(xs.min()) - reach) // tile * tile
+    y1 = min(height, -(-(int(ys.max()) + 1 + reach) // tile) * tile)
+    x1 = min(width, -(-(int(xs.max()) + 1 + reach) // tile) * tile)
+    return y0, y1, x0, x1
+
+
 def self_check(
     frames: Tensor,
     initial: Tensor,
@@ -156,10 +174,12 @@ def self_check(
     record, weight (T-1, H, W) float in [0, 1]: the tuned flow's share per pixel). The record:
     ``kept_tuned_fraction`` (mean weight of the tuned flow over all pixels),
     ``person_tuned_fraction`` (the same on the person), ``regions_tuned`` / ``regions_initial``
-    (background tiles with pixels, counted over pairs) and ``per_pair``: for each pair the
-    tuned fraction, the names of the tiles kept tuned, ``regions``: {name: [mean census error of
-    the initial flow, of the tuned flow, valid pixels]} for every tile with background pixels,
-    and ``person``: [the same three over the person, the share of it kept tuned].
+    (background tiles judged, counted over pairs) and ``per_pair``: for each pair the tuned
+    fraction, the names of the tiles kept tuned, ``regions``: {name: [mean census error of the
+    initial flow, of the tuned flow, valid pixels]} for every judged tile with background
+    pixels, and ``person``: [the same three over the judged person, the share of the person kept
+    tuned]. Only the tiles around where the two flows differ are judged (:func:`changed_box`);
+    elsewhere they are the same flow.
     """
     height, width = initial.shape[-2:]
     labels = region_labels(person, tile)
@@ -167,14 +187,23 @@ def self_check(
     count = len(names)
     choices, per_pair = [], []
     for t in range(initial.shape[0]):  # one pair at a time: census maps are 49 channels deep
+        choice = torch.zeros(height, width, dtype=torch.bool, device=person.device)
+        box = changed_box(initial[t], tuned[t], tile, CENSUS_RADIUS + window // 2 + 1)
+        if box is None:  # the same flow: nothing to judge
+            choices.append(choice)
+            per_pair.append({"tuned": [], "regions": {}, "person": [None, None, 0, 0.0]})
+            continue
+        y0, y1, x0, x1 = box
         pair = frames[t : t + 1], frames[t + 1 : t + 2]
-        err_i, valid_i = photometric_error(*pair, initial[t : t + 1].float())
-        err_t, valid_t = photometric_error(*pair, tuned[t : t + 1].float())
+        err_i, valid_i = photometric_error(*pair, initial[t : t + 1].float(), radius=CENSUS_RADIUS, box=box)
+        err_t, valid_t = photometric_error(*pair, tuned[t : t + 1].float(), radius=CENSUS_RADIUS, box=box)
         err_i, err_t, valid = err_i[0], err_t[0], (valid_i & valid_t)[0]
-        won, mean_i, mean_t, pixels = choose_regions(err_i, err_t, valid & ~person[t], labels[t], count, margin, z)
-        on_person = choose_pixels(err_i, err_t, valid, person[t], window, margin)
-        choices.append(torch.where(person[t], on_person, won[labels[t]]))
-        judged = valid & person[t]
+        on, there = person[t, y0:y1, x0:x1], labels[t, y0:y1, x0:x1]
+        won, mean_i, mean_t, pixels = choose_regions(err_i, err_t, valid & ~on, there, count, margin, z)
+        on_person = choose_pixels(err_i, err_t, valid, on, window, margin)
+        choice[y0:y1, x0:x1] = torch.where(on, on_person, won[there])
+        choices.append(choice)
+        judged = valid & on
         n = int(judged.sum())
         per_pair.append({
             "tuned": [names[r] for r in range(count) if won[r]],

@@ -154,6 +154,7 @@ def photometric_error(
     measure: Measure = "census",
     radius: int = 3,
     ssim_window: int = 11,
+    box: tuple[int, int, int, int] | None = None,
 ) -> tuple[Tensor, Tensor]:
     """How badly ``flow`` (t -> t+1) explains frame t from frame t+1: the per-pixel error
     between ``image1`` and ``image2`` warped by ``flow`` (:func:`warp`).
@@ -161,7 +162,9 @@ def photometric_error(
     image1, image2: (B, 3, H, W) uint8 or float 0..1; flow: (B, 2, H, W) px. ``measure``:
     "census" (:func:`census_error`, window 2 ``radius`` + 1) or "ssim" (:func:`ssim_error`).
     Returns (error (B, H, W) float, valid (B, H, W) bool = the target is in bounds). Lower is
-    better; the error means nothing where the pixel is occluded in frame t+1.
+    better; the error means nothing where the pixel is occluded in frame t+1. With ``box`` =
+    (y0, y1, x0, x1) px, only that part is measured (the same values as the whole frame's
+    there: the window's context around the box is read) and returned, (B, y1 - y0, x1 - x0).
     """
     if measure not in MEASURES:
         raise ValueError(f"`measure` must be one of {MEASURES}, got {measure!r}")
@@ -171,9 +174,14 @@ def photometric_error(
         raise ValueError(f"`image1` and `image2` shapes differ: {tuple(image1.shape)} vs {tuple(image2.shape)}")
     warped, valid = warp(image2, flow)
     image1 = to_unit_float(image1).to(warped.dtype)
-    if measure == "census":
-        return census_error(image1, warped, radius), valid
-    return ssim_error(image1, warped, ssim_window), valid
+    census = measure == "census"
+    error, size, reach = (census_error, radius, radius) if census else (ssim_error, ssim_window, ssim_window // 2)
+    if box is None:
+        return error(image1, warped, size), valid
+    (y0, y1, x0, x1), (H, W) = box, image1.shape[-2:]
+    cy0, cy1, cx0, cx1 = max(0, y0 - reach), min(H, y1 + reach), max(0, x0 - reach), min(W, x1 + reach)
+    part = error(image1[..., cy0:cy1, cx0:cx1], warped[..., cy0:cy1, cx0:cx1], size)
+    return part[..., y0 - cy0 : y1 - cy0, x0 - cx0 : x1 - cx0], valid[..., y0:y1, x0:x1]
 
 
 def track_error(image1: Tensor, image2: Tensor, points1: Tensor, points2: Tensor, radius: int = 3) -> tuple[Tensor, Tensor]:
