@@ -55,6 +55,10 @@ def test_a_crop_box_covers_the_mask_plus_margin_inside_the_grid(margin):
     assert inner[1] - inner[0] == fy1 - fy0 and inner[3] - inner[2] == fx1 - fx0
     assert x1 - x0 < cells[1]  # a crop, not the frame
     assert crop_box(torch.zeros(size, dtype=torch.bool), margin, pad, cells) is None
+    moving = torch.zeros(2, *size)
+    moving[0, 10:30, 150:170] = 40.0  # the pixels go 40 px right: the box reaches there
+    _, _, _, x1_moving = crop_box(mask, margin, pad, cells, moving)
+    assert x1_moving >= x1 and x1_moving * 8 - pad[0] >= min(size[1], 170 + 40 + margin)
     assert crop_box(mask, None, pad, cells) == (0, cells[0], 0, cells[1])
 
 

@@ -32,6 +32,9 @@ DRIFT_GUARDS = ("record", "stop", "rollback")
 #: The flow stages' self-check against the frames (see :mod:`lit_boot.bootstrap.selfcheck`).
 SELF_CHECKS = ("off", "photometric")
 
+#: The default preset's fast fine-tune (issue 15): see lit_boot.flow.warm.
+FAST_FLOW: dict[str, Any] = {"train_parts": "update_block", "warm_start": True, "train_updates": 4, "crop_margin": 24}
+
 #: Per preset and mode: FlowTTT arguments, refiner arguments, options of the orchestrator.
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "paper": {
@@ -44,12 +47,13 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off"},
     },
     "default": {
-        # the sketch's pixels weigh 10x in a SmoothL1 with beta 0.1; the self-check holds the
-        # background (BENCHMARKS.md, "Do no harm": the synthetic suites in both modes, the Sintel windows)
-        "flow_3d": {"sketch": {"footprint": "cross", "size": 15}, "loss": "final", "train_updates": 20, "lr": 1e-5,
-                    "sketch_weight": 10.0, "loss_beta": 0.1},
-        "flow_2d": {"sketch": {"footprint": "cross", "size": 15}, "loss": "final", "train_updates": 20, "lr": 1e-5,
-                    "sketch_weight": 10.0, "loss_beta": 0.1},
+        # the fast fine-tune (lit_boot.flow.warm): frozen cached encoders, 4 updates from RAFT's own
+        # flow on a crop around the person; the sketch's pixels weigh 5x in a SmoothL1 with beta
+        # 0.1; the self-check holds the background (BENCHMARKS.md, "Speed" and "Do no harm")
+        "flow_3d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
+                    "sketch_weight": 5.0, "loss_beta": 0.1},
+        "flow_2d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
+                    "sketch_weight": 5.0, "loss_beta": 0.1},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
         "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric"},

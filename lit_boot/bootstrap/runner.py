@@ -208,6 +208,9 @@ class Bootstrap:
                   "photo_error": photo_error(st.scene.frames, mean),
                   "info": {"target": reports[0], "sketch": self.models[0].hparams["sketch"]}}  # fmt: skip
         log.info(target_line(reports[0]))
+        run = int(reports[0]["train/epochs"])
+        if 0 < run < cfg.epochs:
+            log.info(f"  plateau: the training loss stopped falling; stopped after {run} of {cfg.epochs} epochs")
         if check is not None:
             record["info"]["self_check"] = check
             log.info(summary_line(check))

@@ -93,14 +93,15 @@ def fine_tune_flow(
     progress_bar: bool = True,
 ) -> dict[str, float]:
     """Fine-tune ``model`` in place on the stick-man from ``scene``'s current poses; returns
-    FlowTTT's target report (bones rejected by the guard, painted fraction, ...). A
-    non-finite value raises NonFiniteError (the model holds the last good step's weights)."""
+    FlowTTT's target report (bones rejected by the guard, painted fraction, ...) with
+    ``train/epochs``, the epochs run (fewer than ``epochs`` when the plateau stop ended the fit).
+    A non-finite value raises NonFiniteError (the model holds the last good step's weights)."""
     model.forget_targets()  # rebuilt from these poses
     data = SceneFlowData(scene, pose_source=SOURCE_OF_MODE[mode])
     trainer = _flow_trainer(epochs, accelerator, precision, loggers, progress_bar)
     trainer.fit(model, datamodule=data)
     _raise_fault(trainer, "FlowTTT")
-    return dict(model.target_report)
+    return {**model.target_report, "train/epochs": float(trainer.current_epoch)}
 
 
 def refine_poses_stage(

@@ -259,7 +259,8 @@ class FlowTTT(L.LightningModule):
             cache = self.warm_cache(dm.scene.frames)
             margin = self.hparams.crop_margin
             # with a margin, a pair with nothing painted has no box (its flow stays the untuned one)
-            self.boxes = [crop_box(m, margin, cache.pad, cache.cells) for m in self.sketch_masks.cpu()]
+            self.boxes = [crop_box(m, margin, cache.pad, cache.cells, t)
+                          for m, t in zip(self.sketch_masks.cpu(), self.targets.cpu())]  # fmt: skip
             if self.original is None:
                 self.original = cache.base
         if self.original is None and dm is not None and self.trainer.limit_val_batches:

@@ -112,16 +112,21 @@ class FeatureCache:
                            crop(self.context[i]), crop(self.flow8[i]), updates, grad_updates)[0]  # fmt: skip
 
 
-def crop_box(mask: Tensor, margin: int | None, pad: tuple[int, int, int, int], cells: tuple[int, int]) -> tuple[int, int, int, int] | None:
-    """The box of cells (y0, y1, x0, x1) holding ``mask`` (H, W) bool's bounding box plus
-    ``margin`` px, grown to :data:`MIN_CELLS` a side where the grid allows; the whole grid when
-    ``margin`` is None; None when the mask is empty and a margin is given (nothing to crop to)."""
+def crop_box(mask: Tensor, margin: int | None, pad: tuple[int, int, int, int], cells: tuple[int, int],
+             flow: Tensor | None = None) -> tuple[int, int, int, int] | None:  # fmt: skip
+    """The box of cells (y0, y1, x0, x1) holding ``mask`` (H, W) bool's bounding box, and where
+    ``flow`` (2, H, W) px (the target) moves its pixels, plus ``margin`` px, grown to
+    :data:`MIN_CELLS` a side where the grid allows; the whole grid when ``margin`` is None; None
+    when the mask is empty and a margin is given (nothing to crop to)."""
     h, w = cells
     if margin is None:
         return 0, h, 0, w
     ys, xs = torch.nonzero(mask, as_tuple=True)
     if ys.numel() == 0:
         return None
+    if flow is not None:  # the correlation must reach where the pixels go
+        u, v = flow[0, ys, xs], flow[1, ys, xs]
+        ys, xs = torch.cat([ys, (ys + v).round().long()]), torch.cat([xs, (xs + u).round().long()])
     left, _, top, _ = pad
 
     def span(lo: int, hi: int, size: int) -> tuple[int, int]:
