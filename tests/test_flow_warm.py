@@ -75,10 +75,11 @@ def test_warm_start_needs_frozen_encoders():
         FlowTTT(weights=None, warm_start=True)
 
 
-def test_warm_fine_tune_follows_the_target_on_the_crop_and_keeps_the_untuned_flow_outside(shared, tmp_path):
+def test_warm_fine_tune_follows_the_target_and_pasted_keeps_the_untuned_flow_outside_the_crop(shared, tmp_path):
     torch.manual_seed(0)
     wide = make_scene(motion="run", frames=3, height=96, width=256, seed=0)  # the crop is narrower than the frame
-    model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0)
+    model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0,
+                    paste_crop=True)  # fmt: skip
     data = SceneFlowData(wide, pose_source="gt", shuffle=False)
     untuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])  # RAFT's own flow: builds the cache
     cache = model.cache
@@ -124,3 +125,18 @@ def test_after_a_fit_other_frames_are_predicted_from_zero(scene, tmp_path):
     with torch.no_grad():
         plain = predict_flow(model.raft.eval(), other.frames[0], other.frames[1], 3)
     torch.testing.assert_close(flow, plain)
+
+
+def test_by_default_the_tuned_update_block_predicts_the_whole_frame_from_the_untuned_flow(shared, tmp_path):
+    torch.manual_seed(0)
+    wide = make_scene(motion="run", frames=3, height=96, width=256, seed=0)
+    model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0)
+    data = SceneFlowData(wide, pose_source="gt", shuffle=False)
+    trainer(tmp_path, epochs=2).fit(model, datamodule=data)
+    tuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])
+    for i, box in enumerate(model.boxes):  # trained on the crop, predicted everywhere from the untuned flow
+        (fy0, fy1, fx0, fx1), _ = box_region(box, model.cache.pad, tuned.shape[-2:])
+        outside = torch.ones(tuned.shape[-2:], dtype=torch.bool)
+        outside[fy0:fy1, fx0:fx1] = False
+        assert not torch.equal(tuned[i][:, outside], model.cache.base[i][:, outside])
+        assert (tuned[i] - model.cache.base[i]).norm(dim=0)[outside].mean() < 0.5  # a warm start: near it

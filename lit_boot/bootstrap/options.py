@@ -54,6 +54,7 @@ class FlowOptions(TypedDict, total=False):
     crop_margin: int | None
     hold_weight: float
     warm_start: bool
+    paste_crop: bool
     plateau_patience: int | None
     plateau_delta: float
     sketch: SketchOptions

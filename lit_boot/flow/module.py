@@ -62,16 +62,18 @@ class FlowTTT(L.LightningModule):
         freeze_batchnorm: keep BatchNorm statistics fixed (the paper does not).
         crop_margin: train on a crop around the sketch (its bounding box plus this margin, px)
             while predicting on full frames; None trains on full frames. With ``warm_start``
-            the crop is of the cached feature maps, and predictions too are made on it and pasted
-            into the untuned flow (outside it the output is the untuned flow).
+            the crop is of the cached feature maps (see ``paste_crop``).
         hold_weight: in crop mode, weight of a second crop elsewhere in the frame whose target is
             the base flow, which holds the unseen rest of the frame in place (0: off; not used
-            with ``warm_start``, whose output outside the crop is the untuned flow).
+            with ``warm_start``, where every prediction starts from the untuned flow).
         warm_start: the fast fine-tune (:mod:`lit_boot.flow.warm`; needs
             ``train_parts="update_block"``): the frozen encoders' outputs and the untuned flow
             (``predict_updates`` iterations, also the target's base flow) are computed once per
             scene; training steps and predictions run ``train_updates`` iterations from that
             flow. A prediction on other frames than the fit's runs from zero.
+        paste_crop: with ``warm_start`` and ``crop_margin``: predict the whole frame from the
+            untuned flow (False), or predict on the crop only and paste it into the untuned flow
+            (True: outside the crop the output is the untuned flow, exactly).
         plateau_patience: stop fitting when the epoch's mean training loss has not fallen below
             the best epoch's by ``plateau_delta`` times the first epoch's for this many epochs
             (Lightning's EarlyStopping on ``train/loss_rel``); None: always ``max_epochs``.
@@ -97,6 +99,7 @@ class FlowTTT(L.LightningModule):
         crop_margin: int | None = None,
         hold_weight: float = 1.0,
         warm_start: bool = False,
+        paste_crop: bool = False,
         plateau_patience: int | None = None,
         plateau_delta: float = 0.01,
         sketch: SketchConfig | None = None,
@@ -234,12 +237,19 @@ class FlowTTT(L.LightningModule):
     def on_validation_start(self) -> None:
         self._prediction = self._source()
 
+    def _boxes(self, index: torch.Tensor, grad: bool) -> list[tuple[int, int, int, int] | None]:
+        """Each pair's box: its crop in training; in prediction too, or the whole frame when
+        ``paste_crop`` is off."""
+        if grad or self.hparams.paste_crop:
+            return [self.boxes[i] for i in index.tolist()]
+        return [crop_box(torch.ones(1, 1, dtype=torch.bool), None, self.cache.pad, self.cache.cells)] * len(index)
+
     def _warm_flows(self, index: torch.Tensor, grad: bool) -> list[torch.Tensor | None]:
-        """Per pair of ``index``: the last training iterations' flows on its box (None: no box)."""
+        """Per pair of ``index``: the last iterations' flows on its box (None: no box)."""
         hp = self.hparams
-        return [None if self.boxes[i] is None else
-                self.cache.flows(self.raft, int(i), self.boxes[i], hp.train_updates, hp.grad_updates if grad else 1)
-                for i in index.tolist()]  # fmt: skip
+        return [None if box is None else
+                self.cache.flows(self.raft, int(i), box, hp.train_updates, hp.grad_updates if grad else 1)
+                for i, box in zip(index.tolist(), self._boxes(index, grad))]  # fmt: skip
 
     def on_fit_start(self) -> None:
         dm = self.trainer.datamodule
@@ -383,8 +393,8 @@ class FlowTTT(L.LightningModule):
             return self.cache.base[idx].to(self.device)
         if source != "warm":
             return predict_flow(self.raft, batch["image1"], batch["image2"], self.hparams.predict_updates).float()
-        out = [self.cache.base[i] if flows is None else paste(self.cache.base[i], flows[-1].float().cpu(), self.boxes[i], self.cache.pad)
-               for i, flows in zip(idx.tolist(), self._warm_flows(idx, grad=False))]  # fmt: skip
+        out = [self.cache.base[i] if flows is None else paste(self.cache.base[i], flows[-1].float().cpu(), box, self.cache.pad)
+               for i, flows, box in zip(idx.tolist(), self._warm_flows(idx, grad=False), self._boxes(idx, grad=False))]  # fmt: skip
         return torch.stack(out).to(self.device)
 
     def validation_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
