@@ -43,6 +43,7 @@ def main() -> None:
     p.add_argument("--crop-margin", type=int, default=None)
     p.add_argument("--warm-start", action="store_true", help="frozen cached encoders, warm start (train_parts update_block)")
     p.add_argument("--lr", type=float, default=None)
+    p.add_argument("--flow", default="{}", help="more FlowTTT options over the preset's, JSON")
     p.add_argument("--mode", default="3d", choices=("3d", "2d"))
     p.add_argument("--epochs", type=int, default=None, help="per flow stage (default: the mode's, 8 in 3D, 50 in 2D)")
     p.add_argument("--pose-steps", type=int, default=1500)
@@ -52,6 +53,7 @@ def main() -> None:
     given = {"train_updates": args.train_updates, "grad_updates": args.grad_updates, "crop_margin": args.crop_margin,
              "lr": args.lr}  # fmt: skip
     flow.update({k: v for k, v in given.items() if v is not None})
+    flow.update(json.loads(args.flow))
     if args.warm_start:
         flow.update(warm_start=True, train_parts="update_block")
     with tempfile.TemporaryDirectory() as tmp:

@@ -48,3 +48,15 @@ def test_the_command_line_checks_the_keys_and_their_types(tmp_path, capsys):
     assert main([*base, "--flow.train_updates", "many"]) == 2
     assert "--flow: expected int, got 'many'" in capsys.readouterr().err
     assert not (tmp_path / "scene").exists() and not list(tmp_path.iterdir())  # nothing written
+
+
+def test_the_default_preset_fine_tunes_fast_and_the_paper_preset_as_the_authors():
+    for mode in ("3d", "2d"):
+        fast = BootstrapConfig(mode=mode).flow_kwargs(0, 100.0)
+        assert fast["warm_start"] and fast["train_parts"] == "update_block" and fast["crop_margin"] == 24
+        model = FlowTTT(**{**fast, "weights": None, "sketch": None})
+        assert model.hparams.warm_start and not model.hparams.paste_crop  # predictions on the whole frame
+        paper = BootstrapConfig(mode=mode, preset="paper").flow_kwargs(0, 100.0)
+        assert "warm_start" not in paper and paper["train_updates"] == 20
+        authors = BootstrapConfig(mode=mode, flow={"warm_start": False, "train_parts": "all"}).flow_kwargs(0, 100.0)
+        assert not authors["warm_start"] and authors["train_parts"] == "all"  # the user's choice wins

@@ -33,7 +33,7 @@ DRIFT_GUARDS = ("record", "stop", "rollback")
 SELF_CHECKS = ("off", "photometric")
 
 #: The default preset's fast fine-tune (issue 15): see lit_boot.flow.warm.
-FAST_FLOW: dict[str, Any] = {"train_parts": "update_block", "warm_start": True, "train_updates": 4, "crop_margin": 24}
+FAST_FLOW: dict[str, Any] = {"train_parts": "update_block", "warm_start": True, "train_updates": 2, "crop_margin": 24}
 
 #: Per preset and mode: FlowTTT arguments, refiner arguments, options of the orchestrator.
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
@@ -47,13 +47,14 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off"},
     },
     "default": {
-        # the fast fine-tune (lit_boot.flow.warm): frozen cached encoders, 4 updates from RAFT's own
-        # flow on a crop around the person; the sketch's pixels weigh 5x in a SmoothL1 with beta
-        # 0.1; the self-check holds the background (BENCHMARKS.md, "Speed" and "Do no harm")
+        # the fast fine-tune (lit_boot.flow.warm): frozen cached encoders, 2 updates from RAFT's own
+        # flow, trained on a crop around the person, predicted on the whole frame; the sketch's
+        # pixels weigh 5x in a SmoothL1 with beta 0.1; in 2D the fit stops when its loss stops
+        # falling; the self-check holds the background (BENCHMARKS.md, "Speed" and "Do no harm")
         "flow_3d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
                     "sketch_weight": 5.0, "loss_beta": 0.1},
         "flow_2d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
-                    "sketch_weight": 5.0, "loss_beta": 0.1},
+                    "sketch_weight": 5.0, "loss_beta": 0.1, "plateau_patience": 3},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
         "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric"},
