@@ -9,6 +9,7 @@ import torch
 from lit_boot.cli import main
 from lit_boot.data import load_scene, read_flo, save_scene
 from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig, predict_flow
+from lit_boot.flow.crops import anchor_box, sketch_box
 from lit_boot.synth import make_scene
 
 FAST = dict(train_updates=2, predict_updates=3, sketch=SketchConfig(size=3, guard=False))
@@ -117,10 +118,10 @@ def test_crop_training_holds_the_rest_of_the_frame(scene, tmp_path):
     t = trainer(tmp_path, limit_val_batches=0)
     t.fit(model, datamodule=SceneFlowData(scene, pose_source="gt"))
     assert torch.isfinite(t.callback_metrics["train/loss_epoch"])
-    box = model._crop(model.sketch_masks[0])
+    box = sketch_box(model.sketch_masks[0], 8)
     y0, y1, x0, x1 = box
     assert (y1 - y0) < scene.height or (x1 - x0) < scene.width  # a real crop
-    anchor = model._anchor(box, scene.height, scene.width)
+    anchor = anchor_box(box, scene.height, scene.width)
     assert (anchor[1] - anchor[0], anchor[3] - anchor[2]) == (y1 - y0, x1 - x0)
 
 

@@ -23,6 +23,7 @@ from lightning.pytorch.utilities import rank_zero_warn
 
 from ..finite import FiniteGuard
 from ..metrics import EndPointError, FlowMetrics
+from .crops import crop_loss
 from .gate import gate_sketch
 from .raft import load_raft, predict_flow
 from .sketch import SketchConfig, sketch_from_layout, target_flow
@@ -309,27 +310,6 @@ class FlowTTT(L.LightningModule):
         n = len(flows)
         return sum(self.hparams.gamma ** (n - 1 - i) * one(f) for i, f in enumerate(flows))
 
-    def _crop(self, mask: torch.Tensor) -> tuple[int, int, int, int] | None:
-        """(y0, y1, x0, x1): the sketch's bounding box plus the margin, or None."""
-        ys, xs = torch.nonzero(mask, as_tuple=True)
-        if ys.numel() == 0:
-            return None
-        m, (H, W) = self.hparams.crop_margin, mask.shape
-        return max(0, int(ys.min()) - m), min(H, int(ys.max()) + m + 1), max(0, int(xs.min()) - m), min(W, int(xs.max()) + m + 1)
-
-    def _anchor(self, box: tuple[int, int, int, int], H: int, W: int) -> tuple[int, int, int, int]:
-        """A box of the same size elsewhere in the frame, overlapping ``box`` the least."""
-        y0, y1, x0, x1 = box
-        h, w = y1 - y0, x1 - x0
-        best, best_overlap = (0, h, 0, w), None
-        for _ in range(8):
-            ay = int(torch.randint(0, H - h + 1, ()))
-            ax = int(torch.randint(0, W - w + 1, ()))
-            overlap = max(0, min(y1, ay + h) - max(y0, ay)) * max(0, min(x1, ax + w) - max(x0, ax))
-            if best_overlap is None or overlap < best_overlap:
-                best, best_overlap = (ay, ay + h, ax, ax + w), overlap
-        return best
-
     def _step_pair(self, image1, image2, target, weight) -> torch.Tensor:
         flows = predict_flow(self.raft, image1, image2, self.hparams.train_updates, all_updates=True,
                              grad_updates=self.hparams.grad_updates)  # fmt: skip
@@ -347,18 +327,8 @@ class FlowTTT(L.LightningModule):
         elif self.hparams.crop_margin is None:
             loss = self._step_pair(batch["image1"], batch["image2"], target, weight)
         else:
-            losses = []
-            for b in range(len(idx)):
-                box = self._crop(mask[b]) or (0, mask.shape[1], 0, mask.shape[2])
-                # Outside the sketch the target is the base flow: the anchor crop holds it there.
-                boxes = [(box, 1.0)]
-                if self.hparams.hold_weight > 0:
-                    boxes.append((self._anchor(box, *mask.shape[1:]), self.hparams.hold_weight))
-                for (y0, y1, x0, x1), w in boxes:
-                    crop = lambda x: x[..., y0:y1, x0:x1]  # noqa: E731
-                    losses.append(w * self._step_pair(crop(batch["image1"][b]), crop(batch["image2"][b]),
-                                                      crop(target[b])[None], crop(weight[b])[None]))  # fmt: skip
-            loss = sum(losses) / len(idx)
+            loss = crop_loss(self._step_pair, batch["image1"], batch["image2"], target, weight, mask,
+                             self.hparams.crop_margin, self.hparams.hold_weight)  # fmt: skip
         self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(idx))
         self._epoch_loss += torch.stack([loss.detach().float(), torch.ones((), device=loss.device)])
         return loss
