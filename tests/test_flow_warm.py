@@ -116,15 +116,23 @@ def test_the_cache_is_built_with_the_untuned_network_after_resuming_tuned_weight
     assert all(torch.equal(v, model.raft.update_block.state_dict()[k]) for k, v in tuned.items())  # restored
 
 
-def test_after_a_fit_other_frames_are_predicted_from_zero(scene, tmp_path):
+def test_after_a_fit_other_frames_are_predicted_warm_from_their_own_untuned_flow(scene, tmp_path):
     torch.manual_seed(0)
     model = FlowTTT(lr=1e-3, **WARM)
     trainer(tmp_path).fit(model, datamodule=SceneFlowData(scene, pose_source="gt"))
     other = make_scene(motion="walk", frames=2, height=64, width=96, seed=1)
     flow = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=SceneFlowData(other, shuffle=False))])
+    cache = model.cache
+    assert cache.fits(other.frames) and model.boxes is None  # rebuilt for these frames, the fit's boxes dropped
+    untuned = FlowTTT(**WARM)
+    untuned.raft.load_state_dict({**model.raft.state_dict(), **model._untuned})
     with torch.no_grad():
-        plain = predict_flow(model.raft.eval(), other.frames[0], other.frames[1], 3)
-    torch.testing.assert_close(flow, plain)
+        torch.testing.assert_close(cache.base, predict_flow(untuned.raft.eval(), other.frames[0], other.frames[1], 3))
+        whole = (0, cache.cells[0], 0, cache.cells[1])
+        tuned = cache.flows(model.raft.eval(), 0, whole, 2)[-1]
+    _, (by0, by1, bx0, bx1) = box_region(whole, cache.pad, flow.shape[-2:])
+    torch.testing.assert_close(flow[0], tuned[0, :, by0:by1, bx0:bx1])
+    assert not torch.equal(flow, cache.base)  # the tuned iterations moved it
 
 
 def test_by_default_the_tuned_update_block_predicts_the_whole_frame_from_the_untuned_flow(shared, tmp_path):

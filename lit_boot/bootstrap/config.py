@@ -9,7 +9,10 @@ Presets (``BootstrapConfig.preset``):
 - ``default``: the paper's text instead of its code where they differ (a cross of radius 15
   px), with the footprint scaled to the person's size in the video (15 px at a person
   450 px tall, as on Human3.6M; never below 2 px), since a fixed 30 px square paints most
-  of a small person and the background around it. Everything else as ``paper``.
+  of a small person and the background around it; the self-check on; and the fast fine-tune
+  (:mod:`lit_boot.flow.warm`: frozen cached encoders, 2 update iterations per step from RAFT's
+  own flow on a crop around the person, lr 3e-5, the sketch's pixels 5x; in 2D mode the fit
+  stops when its loss stops falling). Everything else as ``paper``.
 
 A user's ``flow`` / ``pose`` dicts (FlowTTT's / the refiner's constructor arguments, typed by
 :mod:`~lit_boot.bootstrap.options`) override the preset, key by key (``sketch`` too:
@@ -85,12 +88,13 @@ class BootstrapConfig:
             only; paper 3.3).
         preset: the method's choices the run starts from. default: the paper's text, the
             stick-man painted with crosses of radius 15 px at a person 450 px tall, scaled to
-            the person's height in the video (at least 2 px); the self-check on; the sketch's
-            pixels weigh 10x in the loss (SmoothL1 beta 0.1). paper: the authors' code, 30x30
-            px squares (6x6 in 2d mode) at 22 points per bone, whatever the person's size.
-            Both: 20 RAFT updates in training, loss on the final prediction, lr 1e-5, binary
-            confidences, 16-bit mixed precision on CUDA. --flow and --pose override them key
-            by key.
+            the person's height in the video (at least 2 px); the self-check on; the fast
+            fine-tune (2 warm RAFT updates per step on a crop, frozen encoders, lr 3e-5; the
+            plateau stop in 2d mode) with the sketch's pixels 5x in the loss (SmoothL1 beta
+            0.1). paper: the authors' code, 30x30 px squares (6x6 in 2d mode) at 22 points per
+            bone, whatever the person's size, 20 RAFT updates in training from zero, every
+            weight trained, lr 1e-5. Both: loss on the final prediction, binary confidences,
+            16-bit mixed precision on CUDA. --flow and --pose override them key by key.
         cycles: pose cycles; the run is flow, (pose, flow) x cycles: the paper's 1 gives
             flow -> pose -> flow.
         flow: FlowTTT arguments over the preset's (arch, weights, lr, sketch, crop_margin, ...).

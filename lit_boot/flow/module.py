@@ -71,7 +71,7 @@ class FlowTTT(L.LightningModule):
             ``train_parts="update_block"``): the frozen encoders' outputs and the untuned flow
             (``predict_updates`` iterations, also the target's base flow) are computed once per
             scene; training steps and predictions run ``train_updates`` iterations from that
-            flow. A prediction on other frames than the fit's runs from zero.
+            flow (on other frames than the fit's too: their cache is built first).
         paste_crop: with ``warm_start`` and ``crop_margin``: predict the whole frame from the
             untuned flow (False), or predict on the crop only and paste it into the untuned flow
             (True: outside the crop the output is the untuned flow, exactly).
@@ -209,6 +209,7 @@ class FlowTTT(L.LightningModule):
         """The feature cache of ``frames`` (T, 3, H, W), built with the untuned update block
         (the weights this module was made with) unless the one held fits."""
         if self.cache is None or not self.cache.fits(frames):
+            self.boxes = None  # the boxes were the previous frames'
             tuned = self._trainable_state()
             self.raft.load_state_dict(self._untuned, strict=False)
             try:
@@ -218,19 +219,18 @@ class FlowTTT(L.LightningModule):
         return self.cache
 
     def _source(self) -> str:
-        """How this predict or validation run predicts: "warm" (after a fit, on the fit's
-        frames), "cache" (warm_start, untuned: the cache's base flow, which is RAFT's own
-        prediction, built now if needed), else "plain" (``predict_updates`` from zero)."""
+        """How this predict or validation run predicts, with ``warm_start``: "cache" while
+        untuned (the cache's base flow: RAFT's own prediction; the cache is built now if it does
+        not fit the frames, and kept for the fit), else "warm" (the tuned iterations from RAFT's
+        own flow, on any frames). Without ``warm_start``, or without a datamodule: "plain"
+        (``predict_updates`` iterations from zero)."""
         dm = self.trainer.datamodule if self._trainer is not None else None
         if not self.hparams.warm_start or dm is None:
             return "plain"
-        if self.boxes is not None and self.cache is not None and self.cache.fits(dm.scene.frames):
-            return "warm"
+        self.warm_cache(dm.scene.frames)
         state = self._trainable_state()
-        if all(torch.equal(state[k], self._untuned[k].to(state[k].device)) for k in state):
-            self.warm_cache(dm.scene.frames)  # RAFT's own flow, keeping the encoders' outputs for the fit
-            return "cache"
-        return "plain"
+        untuned = all(torch.equal(state[k], self._untuned[k].to(state[k].device)) for k in state)
+        return "cache" if untuned else "warm"
 
     def on_predict_start(self) -> None:
         self._prediction = self._source()
@@ -239,9 +239,9 @@ class FlowTTT(L.LightningModule):
         self._prediction = self._source()
 
     def _boxes(self, index: torch.Tensor, grad: bool) -> list[tuple[int, int, int, int] | None]:
-        """Each pair's box: its crop in training; in prediction too, or the whole frame when
-        ``paste_crop`` is off."""
-        if grad or self.hparams.paste_crop:
+        """Each pair's box: its crop in training; in prediction too with ``paste_crop`` (after a
+        fit on these frames), else the whole frame."""
+        if grad or (self.hparams.paste_crop and self.boxes is not None):
             return [self.boxes[i] for i in index.tolist()]
         return [crop_box(torch.ones(1, 1, dtype=torch.bool), None, self.cache.pad, self.cache.cells)] * len(index)
 
