@@ -12,7 +12,8 @@ Presets (``BootstrapConfig.preset``):
   of a small person and the background around it; the self-check on; and the fast fine-tune
   (:mod:`lit_boot.flow.warm`: frozen cached encoders, 2 update iterations per step from RAFT's
   own flow on a crop around the person, lr 3e-5, the sketch's pixels 5x; in 2D mode the fit
-  stops when its loss stops falling). Everything else as ``paper``.
+  stops when its loss stops falling, and backpropagates through the last update only).
+  Everything else as ``paper``.
 
 A user's ``flow`` / ``pose`` dicts (FlowTTT's / the refiner's constructor arguments, typed by
 :mod:`~lit_boot.bootstrap.options`) override the preset, key by key (``sketch`` too:
@@ -52,12 +53,13 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "default": {
         # the fast fine-tune (lit_boot.flow.warm): frozen cached encoders, 2 updates from RAFT's own
         # flow, trained on a crop around the person, predicted on the whole frame; the sketch's
-        # pixels weigh 5x in a SmoothL1 with beta 0.1; in 2D the fit stops when its loss stops
-        # falling; the self-check holds the background (BENCHMARKS.md, "Speed" and "Do no harm")
+        # pixels weigh 5x in a SmoothL1 with beta 0.1; in 2D (50 epochs) the fit stops when its
+        # loss stops falling and backpropagates through the last update only; the self-check
+        # holds the background (BENCHMARKS.md, "Speed" and "Do no harm")
         "flow_3d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
                     "sketch_weight": 5.0, "loss_beta": 0.1},
         "flow_2d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
-                    "sketch_weight": 5.0, "loss_beta": 0.1, "plateau_patience": 3},
+                    "sketch_weight": 5.0, "loss_beta": 0.1, "plateau_patience": 3, "grad_updates": 1},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
         "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric"},
@@ -90,11 +92,12 @@ class BootstrapConfig:
             stick-man painted with crosses of radius 15 px at a person 450 px tall, scaled to
             the person's height in the video (at least 2 px); the self-check on; the fast
             fine-tune (2 warm RAFT updates per step on a crop, frozen encoders, lr 3e-5; the
-            plateau stop in 2d mode) with the sketch's pixels 5x in the loss (SmoothL1 beta
-            0.1). paper: the authors' code, 30x30 px squares (6x6 in 2d mode) at 22 points per
-            bone, whatever the person's size, 20 RAFT updates in training from zero, every
-            weight trained, lr 1e-5. Both: loss on the final prediction, binary confidences,
-            16-bit mixed precision on CUDA. --flow and --pose override them key by key.
+            plateau stop and gradients through the last update in 2d mode) with the sketch's
+            pixels 5x in the loss (SmoothL1 beta 0.1). paper: the authors' code, 30x30 px
+            squares (6x6 in 2d mode) at 22 points per bone, whatever the person's size, 20 RAFT
+            updates in training from zero, every weight trained, lr 1e-5. Both: loss on the
+            final prediction, binary confidences, 16-bit mixed precision on CUDA. --flow and
+            --pose override them key by key.
         cycles: pose cycles; the run is flow, (pose, flow) x cycles: the paper's 1 gives
             flow -> pose -> flow.
         flow: FlowTTT arguments over the preset's (arch, weights, lr, sketch, crop_margin, ...).
