@@ -55,7 +55,7 @@ def test_the_default_preset_fine_tunes_fast_and_the_paper_preset_as_the_authors(
         fast = BootstrapConfig(mode=mode).flow_kwargs(0, 100.0)
         assert fast["warm_start"] and fast["train_parts"] == "update_block" and fast["crop_margin"] == 24
         model = FlowTTT(**{**fast, "weights": None, "sketch": None})
-        assert model.hparams.warm_start and not model.hparams.paste_crop  # predictions on the whole frame
+        assert model.hparams.warm_start and model.hparams.paste_crop  # the tuned flow only on the crop
         paper = BootstrapConfig(mode=mode, preset="paper").flow_kwargs(0, 100.0)
         assert "warm_start" not in paper and paper["train_updates"] == 20
         authors = BootstrapConfig(mode=mode, flow={"warm_start": False, "train_parts": "all"}).flow_kwargs(0, 100.0)

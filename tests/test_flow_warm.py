@@ -78,8 +78,8 @@ def test_warm_start_needs_frozen_encoders():
 def test_warm_fine_tune_follows_the_target_and_pasted_keeps_the_untuned_flow_outside_the_crop(shared, tmp_path):
     torch.manual_seed(0)
     wide = make_scene(motion="run", frames=3, height=96, width=256, seed=0)  # the crop is narrower than the frame
-    model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0,
-                    paste_crop=True)  # fmt: skip
+    model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0)
+    assert model.hparams.paste_crop  # the default
     data = SceneFlowData(wide, pose_source="gt", shuffle=False)
     untuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])  # RAFT's own flow: builds the cache
     cache = model.cache
@@ -135,10 +135,11 @@ def test_after_a_fit_other_frames_are_predicted_warm_from_their_own_untuned_flow
     assert not torch.equal(flow, cache.base)  # the tuned iterations moved it
 
 
-def test_by_default_the_tuned_update_block_predicts_the_whole_frame_from_the_untuned_flow(shared, tmp_path):
+def test_without_paste_the_tuned_update_block_predicts_the_whole_frame_from_the_untuned_flow(shared, tmp_path):
     torch.manual_seed(0)
     wide = make_scene(motion="run", frames=3, height=96, width=256, seed=0)
-    model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0)
+    model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0,
+                    paste_crop=False)  # fmt: skip
     data = SceneFlowData(wide, pose_source="gt", shuffle=False)
     trainer(tmp_path, epochs=2).fit(model, datamodule=data)
     tuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])

@@ -52,7 +52,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     },
     "default": {
         # the fast fine-tune (lit_boot.flow.warm): frozen cached encoders, 2 updates from RAFT's own
-        # flow, trained on a crop around the person, predicted on the whole frame; the sketch's
+        # flow on a crop around the person, pasted into RAFT's flow; the sketch's
         # pixels weigh 5x in a SmoothL1 with beta 0.1; in 2D (50 epochs) the fit stops when its
         # loss stops falling and backpropagates through the last update only; the self-check
         # holds the background (BENCHMARKS.md, "Speed" and "Do no harm")

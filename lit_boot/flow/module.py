@@ -72,9 +72,10 @@ class FlowTTT(L.LightningModule):
             (``predict_updates`` iterations, also the target's base flow) are computed once per
             scene; training steps and predictions run ``train_updates`` iterations from that
             flow (on other frames than the fit's too: their cache is built first).
-        paste_crop: with ``warm_start`` and ``crop_margin``: predict the whole frame from the
-            untuned flow (False), or predict on the crop only and paste it into the untuned flow
-            (True: outside the crop the output is the untuned flow, exactly).
+        paste_crop: with ``warm_start`` and ``crop_margin``: predict on the crop only and paste
+            it into the untuned flow (True: outside the crop the output is the untuned flow,
+            exactly), or predict the whole frame from the untuned flow (False: the update block
+            then also moves flow it was never taught; BENCHMARKS.md, "Speed").
         plateau_patience: stop fitting when the epoch's mean training loss has not fallen below
             the best epoch's by ``plateau_delta`` times the first epoch's for this many epochs
             (Lightning's EarlyStopping on ``train/loss_rel``); None: always ``max_epochs``.
@@ -100,7 +101,7 @@ class FlowTTT(L.LightningModule):
         crop_margin: int | None = None,
         hold_weight: float = 1.0,
         warm_start: bool = False,
-        paste_crop: bool = False,
+        paste_crop: bool = True,
         plateau_patience: int | None = None,
         plateau_delta: float = 0.01,
         sketch: SketchConfig | None = None,

@@ -6,10 +6,10 @@ pair's context never change during a fine-tune, so they are computed once per sc
 iterations from zero, kept at 1/8 resolution and upsampled). A warm-started step then runs a
 few update iterations from that flow, on a box of cells around the person
 (:func:`crop_box`): the correlation pyramid of the box is built from the cached maps, which is
-cheap, and nothing else of the frame is computed. A warm prediction runs the same iterations
-from the untuned flow on the whole frame (FlowTTT's default: the self-check then keeps the tuned
-flow where the frames say it is better, on the person and off it), or on the same box, pasted
-into the untuned flow (:func:`paste`; outside the box the output *is* the untuned flow).
+cheap, and nothing else of the frame is computed. A warm prediction runs the same iterations on
+the same box and pastes the result into the untuned flow (:func:`paste`, FlowTTT's default):
+outside the box the output *is* the untuned flow, so the fine-tune cannot move the flow where
+the target taught nothing. (Or, ``paste_crop=False``, on the whole frame from the untuned flow.)
 
 Coordinates: boxes are (y0, y1, x0, x1) in cells of the padded 1/8-resolution grid; pixel
 regions are (y0, y1, x0, x1) in px of the unpadded frame.
