@@ -11,8 +11,9 @@ Presets (``BootstrapConfig.preset``):
   450 px tall, as on Human3.6M; never below 2 px), since a fixed 30 px square paints most
   of a small person and the background around it; the self-check on; and the fast fine-tune
   (:mod:`lit_boot.flow.warm`: frozen cached encoders, 2 update iterations per step from RAFT's
-  own flow on a crop around the person, lr 3e-5, the sketch's pixels 5x; in 2D mode the fit
-  stops when its loss stops falling, and backpropagates through the last update only).
+  own flow on a crop around the person, lr 3e-5 (2e-5 in 2D mode), the sketch's pixels 5x; in
+  2D mode the fit stops when its loss stops falling, and backpropagates through the last update
+  only).
   Everything else as ``paper``.
 
 A user's ``flow`` / ``pose`` dicts (FlowTTT's / the refiner's constructor arguments, typed by
@@ -58,7 +59,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         # holds the background (BENCHMARKS.md, "Speed" and "Do no harm")
         "flow_3d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
                     "sketch_weight": 5.0, "loss_beta": 0.1},
-        "flow_2d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
+        "flow_2d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 2e-5,
                     "sketch_weight": 5.0, "loss_beta": 0.1, "plateau_patience": 3, "grad_updates": 1},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
@@ -91,8 +92,8 @@ class BootstrapConfig:
         preset: the method's choices the run starts from. default: the paper's text, the
             stick-man painted with crosses of radius 15 px at a person 450 px tall, scaled to
             the person's height in the video (at least 2 px); the self-check on; the fast
-            fine-tune (2 warm RAFT updates per step on a crop, frozen encoders, lr 3e-5; the
-            plateau stop and gradients through the last update in 2d mode) with the sketch's
+            fine-tune (2 warm RAFT updates per step on a crop, frozen encoders, lr 3e-5; lr
+            2e-5, the plateau stop and gradients through the last update in 2d mode) with the sketch's
             pixels 5x in the loss (SmoothL1 beta 0.1). paper: the authors' code, 30x30 px
             squares (6x6 in 2d mode) at 22 points per bone, whatever the person's size, 20 RAFT
             updates in training from zero, every weight trained, lr 1e-5. Both: loss on the
