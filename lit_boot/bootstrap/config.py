@@ -93,8 +93,8 @@ class BootstrapConfig:
             stick-man painted with crosses of radius 15 px at a person 450 px tall, scaled to
             the person's height in the video (at least 2 px); the self-check on; the fast
             fine-tune (2 warm RAFT updates per step on a crop, frozen encoders, lr 3e-5; lr
-            2e-5, the plateau stop and gradients through the last update in 2d mode) with the sketch's
-            pixels 5x in the loss (SmoothL1 beta 0.1). paper: the authors' code, 30x30 px
+            2e-5, the plateau stop and gradients through the last update in 2d mode) with the
+            sketch's pixels 5x in the loss (SmoothL1 beta 0.1). paper: the authors' code, 30x30 px
             squares (6x6 in 2d mode) at 22 points per bone, whatever the person's size, 20 RAFT
             updates in training from zero, every weight trained, lr 1e-5. Both: loss on the
             final prediction, binary confidences, 16-bit mixed precision on CUDA. --flow and
