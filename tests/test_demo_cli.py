@@ -56,17 +56,17 @@ def test_quick_demo_prints_its_plan_first_and_trains_2_epochs(fake_run: list[dic
     assert json.loads(Path("runs/demo_quick/demo.json").read_text())["epochs"] == 2
 
 
-def test_default_demo_says_it_takes_minutes_and_names_quick(fake_run: list[dict], capsys) -> None:
+def test_default_demo_says_how_long_it_takes_and_names_quick(fake_run: list[dict], capsys) -> None:
     assert main(["demo", *SMALL]) == 0
     first = capsys.readouterr().out.splitlines()[0]
-    assert "8 epochs per flow stage" in first and "(--quick: about 1 min)" in first
+    assert "8 epochs per flow stage" in first and "(--quick: 2 epochs)" in first
     assert fake_run[0]["flow_epochs"] == 8 and fake_run[0]["out"] == Path("runs/demo/bootstrap")
 
 
 def test_demo_estimate_and_restart_rules(fake_run: list[dict], capsys) -> None:
     assert main(["demo", "--out", "d"]) == 0
     first = capsys.readouterr().out.splitlines()[0]  # 8 frames, 8 epochs: 112 training steps
-    assert "(8 frames, 256x128, exact GT)" in first and "about 3 min" in first
+    assert "(8 frames, 256x128, exact GT)" in first and "about 1 min" in first
     assert main(["demo", "--out", "d"]) == 0  # the same scene and size: resume
     assert main(["demo", "--out", "d", "--epochs", "3"]) == 0  # another size: start again
     assert [c["overwrite"] for c in fake_run] == [True, False, True]

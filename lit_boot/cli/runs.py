@@ -80,7 +80,7 @@ def demo_parser() -> ArgumentParser:
     parser = ArgumentParser(prog="lit-boot demo", description=(
         "Make a synthetic scene with exact ground truth, bootstrap it (flow -> pose -> flow) with RAFT-small "
         "weights found in checkpoints/ (or downloaded), and print EPE and MPJPE before and after. "
-        "--quick: 2 epochs per flow stage instead of 8 (about a minute on a 2-core CPU)."))  # fmt: skip
+        "--quick: 2 epochs per flow stage instead of 8 (a smaller gain; the fixed costs stay)."))  # fmt: skip
     parser.add_argument("--quick", type=bool, nargs="?", const=True, default=False,
                         help="the same scene, 2 epochs per flow stage, into runs/demo_quick")  # fmt: skip
     parser.add_argument("--out", type=Path | None, default=None,
@@ -97,11 +97,12 @@ def demo_parser() -> ArgumentParser:
 
 
 def demo_minutes(frames: int, height: int, width: int, epochs: int) -> float:
-    """About how long the demo takes from scratch on 2 free CPU cores. Measured: ~1.7 s per
-    training step (one pair, 20 RAFT updates) at 256x128, growing about as the square root of the
-    pixels, plus start-up; far longer on busy cores."""
+    """About how long the demo takes from scratch on 2 free CPU cores. Measured: ~15 s of
+    start-up, RAFT and pose stage, plus ~0.04 s per training step (one pair, 2 warm RAFT updates
+    on a crop) at 256x128, growing about as the square root of the pixels (README, "Quick
+    start"); far longer on busy cores."""
     steps = 2 * (frames - 1) * epochs  # both flow stages train on every pair
-    return (8 + 1.7 * steps * (height * width / (128 * 256)) ** 0.5) / 60
+    return (15 + 0.04 * steps * (height * width / (128 * 256)) ** 0.5) / 60
 
 
 def demo(argv: list[str]) -> int:
@@ -121,7 +122,7 @@ def demo(argv: list[str]) -> int:
     minutes = demo_minutes(args.frames, args.height, args.width, epochs)
     print(f"lit-boot demo: a synthetic {args.motion!r} scene ({args.frames} frames, {args.width}x{args.height}, exact "
           f"GT); RAFT-small fine-tuned {epochs} epochs per flow stage, flow -> pose -> flow; from scratch about "
-          f"{max(1, round(minutes))} min on 2 free CPU cores" + ("" if args.quick else " (--quick: about 1 min)"),
+          f"{max(1, round(minutes))} min on 2 free CPU cores" + ("" if args.quick else " (--quick: 2 epochs)"),
           flush=True)  # fmt: skip
     if fresh:
         save_scene(make_scene(**spec), scene_dir, overwrite=True)
