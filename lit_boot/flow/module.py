@@ -132,6 +132,7 @@ class FlowTTT(L.LightningModule):
         self.boxes: list[tuple[int, int, int, int] | None] | None = None  # warm_start: each pair's crop
         self._untuned = self._trainable_state() if warm_start else None  # the cache's network
         self._prediction = "plain"  # set per predict / validation run (see _source)
+        self._first_loss: float | None = None  # the fit's first epoch's mean loss (train/loss_rel)
         self.val_metrics = FlowMetrics(prefix="val/")  # lit_boot.metrics.suite: the one convention
         self.val_drift = EndPointError()
 
@@ -229,8 +230,8 @@ class FlowTTT(L.LightningModule):
         if not self.hparams.warm_start or dm is None:
             return "plain"
         self.warm_cache(dm.scene.frames)
-        state = self._trainable_state()
-        untuned = all(torch.equal(state[k], self._untuned[k].to(state[k].device)) for k in state)
+        state = self.raft.state_dict()
+        untuned = all(torch.equal(state[k], v.to(state[k].device)) for k, v in self._untuned.items())
         return "cache" if untuned else "warm"
 
     def on_predict_start(self) -> None:
@@ -244,7 +245,7 @@ class FlowTTT(L.LightningModule):
         fit on these frames), else the whole frame."""
         if grad or (self.hparams.paste_crop and self.boxes is not None):
             return [self.boxes[i] for i in index.tolist()]
-        return [crop_box(torch.ones(1, 1, dtype=torch.bool), None, self.cache.pad, self.cache.cells)] * len(index)
+        return [self.cache.whole] * len(index)
 
     def _warm_flows(self, index: torch.Tensor, grad: bool) -> list[torch.Tensor | None]:
         """Per pair of ``index``: the last iterations' flows on its box (None: no box)."""
@@ -288,7 +289,7 @@ class FlowTTT(L.LightningModule):
         total, count = self._epoch_loss.tolist()
         if count:
             mean = total / count
-            if self.current_epoch == 0 or getattr(self, "_first_loss", None) is None:
+            if self.current_epoch == 0 or self._first_loss is None:
                 self._first_loss = mean
             self.log("train/loss_rel", mean / self._first_loss if self._first_loss > 0 else 0.0)
 

@@ -97,6 +97,11 @@ class FeatureCache:
         """(h, w): the padded 1/8-resolution grid."""
         return self.fmaps.shape[-2], self.fmaps.shape[-1]
 
+    @property
+    def whole(self) -> tuple[int, int, int, int]:
+        """The box of the whole grid."""
+        return 0, self.fmaps.shape[-2], 0, self.fmaps.shape[-1]
+
     def flows(self, model: RAFT, pair: int, box: tuple[int, int, int, int], updates: int,
               grad_updates: int | None = None) -> list[Tensor]:  # fmt: skip
         """The flows (1, 2, 8 (y1 - y0), 8 (x1 - x0)) px of the last ``grad_updates`` (None:
