@@ -33,10 +33,14 @@ class NonFiniteError(RuntimeError):
 
 def _max_abs(tensors: list[torch.Tensor]) -> torch.Tensor:
     """The largest |value| over ``tensors`` (NaN if any is NaN), a 0-d float tensor; no sync."""
+    tensors = [t for t in tensors if t.numel()]
     if not tensors:
         return torch.zeros(())
-    norms = torch._foreach_norm(tensors, float("inf"))
-    return torch.stack([n.float() for n in norms]).max()
+    if tensors[0].device.type == "cpu":  # foreach's inf-norm is a plain loop there, ~8x slower
+        maxima = [t.detach().abs().amax().float() for t in tensors]
+    else:
+        maxima = [n.float() for n in torch._foreach_norm(tensors, float("inf"))]
+    return torch.stack(maxima).max()
 
 
 def _copy(dst: list[torch.Tensor], src: list[torch.Tensor]) -> None:

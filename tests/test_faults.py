@@ -22,6 +22,7 @@ from lit_boot.bootstrap.lock import RunLock, RunLockedError
 from lit_boot.data import read_flows
 from lit_boot.finite import FiniteGuard
 from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig
+from lit_boot.optim import adam
 from lit_boot.pose import PoseData, PoseRefiner, load_pose_result, make_trainer
 
 RANDOM_RAFT = {"weights": None, "train_updates": 2, "predict_updates": 3}  # no weights file needed
@@ -82,6 +83,25 @@ def test_flow_ttt_stops_at_a_nan_loss_with_the_last_good_weights(tiny_scene):
     now = FiniteGuard.tracked(model)
     assert not all(t.isfinite().all() for t in snapshots.after[3] if t.is_floating_point())  # the bad step's
     assert same(now, snapshots.after[2]) and not same(now, snapshots.after[1])  # the last good step's weights
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf")])
+def test_the_guards_largest_value_sees_a_single_non_finite_entry(bad):
+    from lit_boot.finite import _max_abs
+
+    tensors = [torch.randn(3, 4), torch.zeros(0), torch.randn(5, dtype=torch.float64)]
+    assert float(_max_abs(tensors)) == pytest.approx(max(float(t.abs().max()) for t in tensors if t.numel()))
+    tensors[2][3] = bad
+    assert not torch.isfinite(_max_abs(tensors))
+    assert float(_max_abs([torch.zeros(0)])) == 0.0
+
+
+def test_both_optimisations_use_the_fused_adam_on_cpu():
+    model = FlowTTT(train_parts="update_block", **RANDOM_RAFT)
+    flow = model.configure_optimizers()
+    assert flow.defaults["fused"] and adam([torch.nn.Parameter(torch.zeros(3))], lr=0.1).defaults["fused"]
+    trained = {id(p) for group in flow.param_groups for p in group["params"]}
+    assert trained == {id(p) for p in model.raft.update_block.parameters()}
 
 
 def test_pose_refiner_keeps_the_last_finite_poses_at_a_nan_loss(tiny_scene):

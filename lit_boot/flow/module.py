@@ -23,6 +23,7 @@ from lightning.pytorch.utilities import rank_zero_warn
 
 from ..finite import FiniteGuard
 from ..metrics import EndPointError, FlowMetrics
+from ..optim import adam
 from .crops import crop_loss
 from .gate import gate_sketch
 from .raft import load_raft, predict_flow
@@ -355,8 +356,8 @@ class FlowTTT(L.LightningModule):
         return callbacks
 
     def configure_optimizers(self) -> torch.optim.Optimizer:
-        params = [p for p in self.raft.parameters() if p.requires_grad]
-        return torch.optim.Adam(params, lr=self.hparams.lr)
+        """Adam over the trained weights (:func:`lit_boot.optim.adam`: fused where the device has one)."""
+        return adam([p for p in self.raft.parameters() if p.requires_grad], lr=self.hparams.lr)
 
     # --- validation and prediction ----------------------------------------------------------------
     def _predict(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:

@@ -30,6 +30,7 @@ from lightning.pytorch.trainer.states import TrainerFn
 from ..core import Scene
 from ..data.readers.pose_file import PoseEstimates
 from ..finite import FiniteGuard, finite_fault
+from ..optim import adam
 from .keypoints import CONFIDENCE_MODES
 from .losses import flow_residual, inside_image
 from .result import PoseResult
@@ -200,11 +201,8 @@ class RefinerBase(L.LightningModule):
 
     # --- optimisation -------------------------------------------------------------------------
     def configure_optimizers(self) -> torch.optim.Optimizer:
-        """Adam; the fused implementation where the device has one (fewer small kernels)."""
-        try:
-            return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, fused=True)
-        except (RuntimeError, ValueError):
-            return torch.optim.Adam(self.parameters(), lr=self.hparams.lr)
+        """Adam (:func:`lit_boot.optim.adam`: fused where the device has one)."""
+        return adam(self.parameters(), lr=self.hparams.lr)
 
     def total_loss(self, with_terms: bool = False) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """The loss (a zero with a gradient if every term is off) and, if asked, each weighted
