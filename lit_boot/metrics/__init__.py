@@ -6,7 +6,8 @@ with root, scale or Procrustes alignment, and acceleration error in mm/frame^2).
 functions take ``(pred, gt, mask, ...)`` tensors on any device; the classes accumulate
 float64 sum states (``dist_reduce_fx="sum"``) and divide only in ``compute()``, so results
 are exact across batches and processes and NaN when nothing was seen. ``suite`` holds what
-lit-boot reports (FlowTTT, the refiners, the orchestrator), under one naming scheme.
+lit-boot reports (FlowTTT, the refiners, the orchestrator), under one naming scheme;
+``states`` their per-scene sum states, merged over a dataset.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from .pose import (
     procrustes_transform,
     scale_align,
 )
+from .states import METRIC_NAMES, compute_metric_states, merge_metric_states, scene_metric_states
 from .suite import FlowMetrics, PoseMetrics, scene_flow_metrics, scene_pose_metrics
 
 __all__ = [
@@ -42,6 +44,10 @@ __all__ = [
     "PoseMetrics",
     "scene_flow_metrics",
     "scene_pose_metrics",
+    "METRIC_NAMES",
+    "scene_metric_states",
+    "merge_metric_states",
+    "compute_metric_states",
     "endpoint_error",
     "flow_error_sums",
     "flow_errors",

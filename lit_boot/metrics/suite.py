@@ -14,6 +14,8 @@ records, summary.json, :class:`~lit_boot.pose.PoseResult`):
 
 Lightning modules log them as ``val/<name>``; the orchestrator's records and the pose results
 hold the bare names. EPE-like means pool every selected pixel (or joint) of every pair.
+``scene_flow_metric_objects`` / ``scene_pose_metric_objects`` give the updated ``Metric``
+objects behind those numbers (their sum states: :mod:`lit_boot.metrics.states`).
 """
 
 from __future__ import annotations
@@ -21,12 +23,25 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 from torch import Tensor
+from torchmetrics import Metric
 
 from ..core import GroundTruth, Scene, get_layout, inside_image
 from .flow import EndPointError, PointEndPointError
 from .pose import AccelerationError, MeanPerJointPositionError, Root
 
-__all__ = ["FlowMetrics", "PoseMetrics", "scene_flow_metrics", "scene_pose_metrics"]
+__all__ = [
+    "FlowMetrics",
+    "PoseMetrics",
+    "scene_flow_metrics",
+    "scene_pose_metrics",
+    "scene_flow_metric_objects",
+    "scene_pose_metric_objects",
+]
+
+
+def _values(metrics: dict[str, Metric]) -> dict[str, float]:
+    """{name: float(metric.compute())}."""
+    return {name: float(metric.compute()) for name, metric in metrics.items()}
 
 
 class FlowMetrics(torch.nn.Module):
@@ -63,8 +78,12 @@ class FlowMetrics(torch.nn.Module):
             H, W = flow.shape[-2:]
             self.epe_joints.update(flow, joints, joints_next - joints, inside_image(joints, H, W))
 
+    def updated(self) -> dict[str, Metric]:
+        """{name: metric} of the metrics updated so far (no prefix)."""
+        return {name: metric for name, metric in self.named_children() if metric.update_called}
+
     def compute(self) -> dict[str, Tensor]:
-        return {self.prefix + name: metric.compute() for name, metric in self.named_children() if metric.update_called}
+        return {self.prefix + name: metric.compute() for name, metric in self.updated().items()}
 
     def reset(self) -> None:
         for metric in self.children():
@@ -84,29 +103,38 @@ class PoseMetrics(torch.nn.Module):
         self.points = MeanPerJointPositionError("none")
 
     @staticmethod
-    def _once(metric, *args: Tensor) -> float:
+    def _once(metric: Metric, *args: Tensor) -> Metric:
+        """A copy of ``metric`` updated with ``args`` alone (the states are the copy's own)."""
+        metric = metric.clone()
         metric.reset()
         metric.update(*args)
-        return float(metric.compute())
+        return metric
 
     @torch.no_grad()
-    def joints3d(self, pred: Tensor, gt: Tensor) -> dict[str, float]:
-        """pred, gt: (T, J, 3) mm."""
+    def joints3d_metrics(self, pred: Tensor, gt: Tensor) -> dict[str, Metric]:
+        """The updated metrics behind :meth:`joints3d`, by name."""
         out = {"mpjpe_mm": self._once(self.mpjpe, pred, gt), "pa_mpjpe_mm": self._once(self.pa_mpjpe, pred, gt)}
         if pred.shape[0] >= 3:
             out["accel_mm_per_frame2"] = self._once(self.accel, pred, gt)
         return out
 
     @torch.no_grad()
+    def points2d_metrics(self, name: str, pred: Tensor, gt: Tensor) -> dict[str, Metric]:
+        """The updated metric behind :meth:`points2d`, {name: metric}."""
+        return {name: self._once(self.points, F.pad(pred, (0, 1)), F.pad(gt, (0, 1)))}  # z = 0 on both sides
+
+    def joints3d(self, pred: Tensor, gt: Tensor) -> dict[str, float]:
+        """pred, gt: (T, J, 3) mm."""
+        return _values(self.joints3d_metrics(pred, gt))
+
     def points2d(self, name: str, pred: Tensor, gt: Tensor) -> dict[str, float]:
         """{name: mean distance px} of pred, gt (T, K, 2) px over every point of every frame."""
-        return {name: self._once(self.points, F.pad(pred, (0, 1)), F.pad(gt, (0, 1)))}  # z = 0 on both sides
+        return _values(self.points2d_metrics(name, pred, gt))
 
 
 @torch.no_grad()
-def scene_flow_metrics(gt: GroundTruth | None, flows: Tensor) -> dict[str, float]:
-    """The flow metrics of ``flows`` (T-1, 2, H, W) px against a scene's ground truth (the GT
-    flow's, and ``epe_joints`` with GT 2D joints); {} without either."""
+def scene_flow_metric_objects(gt: GroundTruth | None, flows: Tensor) -> dict[str, Metric]:
+    """The updated metrics behind :func:`scene_flow_metrics`, by name; {} without GT."""
     if gt is None:
         return {}
     metrics = FlowMetrics()
@@ -114,24 +142,36 @@ def scene_flow_metrics(gt: GroundTruth | None, flows: Tensor) -> dict[str, float
     metrics.update(flows.float(), gt.flow.float() if gt.flow is not None else None, gt.flow_mask(),
                    gt.person_mask[:-1] if gt.person_mask is not None else None,
                    joints[:-1] if joints is not None else None, joints[1:] if joints is not None else None)  # fmt: skip
-    return {name: float(value) for name, value in metrics.compute().items()}
+    return metrics.updated()
+
+
+def scene_flow_metrics(gt: GroundTruth | None, flows: Tensor) -> dict[str, float]:
+    """The flow metrics of ``flows`` (T-1, 2, H, W) px against a scene's ground truth (the GT
+    flow's, and ``epe_joints`` with GT 2D joints); {} without either."""
+    return _values(scene_flow_metric_objects(gt, flows))
 
 
 @torch.no_grad()
-def scene_pose_metrics(scene: Scene, mode: str) -> dict[str, float]:
-    """The scene's current estimates against its ground truth: 3D mode, the 3D joints (GT in
-    the same layout) and their projection (GT 2D joints); 2D mode, ``kp2d_px``; {} without GT."""
+def scene_pose_metric_objects(scene: Scene, mode: str) -> dict[str, Metric]:
+    """The updated metrics behind :func:`scene_pose_metrics`, by name; {} without GT."""
     gt = scene.gt
     if gt is None:
         return {}
     if mode == "2d":
         if gt.keypoints2d is None or scene.keypoints2d is None:
             return {}
-        return PoseMetrics().points2d("kp2d_px", scene.keypoints2d.float(), gt.keypoints2d.float())
+        return PoseMetrics().points2d_metrics("kp2d_px", scene.keypoints2d.float(), gt.keypoints2d.float())
     if scene.joints3d is None or get_layout(gt.joints_layout) != get_layout(scene.joints3d_layout):
         return {}
     metrics = PoseMetrics(root=get_layout(scene.joints3d_layout).root or (0,))
-    out = metrics.joints3d(scene.joints3d.float(), gt.joints3d.float()) if gt.joints3d is not None else {}
+    out = metrics.joints3d_metrics(scene.joints3d.float(), gt.joints3d.float()) if gt.joints3d is not None else {}
     if gt.joints2d is not None and scene.cameras is not None:
-        out.update(metrics.points2d("proj2d_px", scene.cameras.project(scene.joints3d.float()), gt.joints2d.float()))
+        projected = scene.cameras.project(scene.joints3d.float())
+        out.update(metrics.points2d_metrics("proj2d_px", projected, gt.joints2d.float()))
     return out
+
+
+def scene_pose_metrics(scene: Scene, mode: str) -> dict[str, float]:
+    """The scene's current estimates against its ground truth: 3D mode, the 3D joints (GT in
+    the same layout) and their projection (GT 2D joints); 2D mode, ``kp2d_px``; {} without GT."""
+    return _values(scene_pose_metric_objects(scene, mode))
