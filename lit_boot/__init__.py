@@ -15,6 +15,8 @@ The public API:
 - the flow stage (``lit_boot.flow``): :class:`FlowTTT` with its :class:`SketchConfig`;
 - the whole method (``lit_boot.bootstrap``): :class:`Bootstrap` (``Bootstrap(scene, out).run()``),
   :class:`BootstrapConfig` and :class:`BootstrapResult`;
+- many scenes (``lit_boot.dataset``): :func:`discover` (a dataset's scenes as :class:`Task` s) and
+  :func:`run_dataset` (all of them, resumable, on local worker processes or Ray);
 - real data (``lit_boot.data.readers``): :func:`read_video` (a video file or a folder of
   frames), :func:`read_estimates` (pose files of several formats) and :class:`PoseEstimates`.
 
@@ -30,6 +32,7 @@ from ._lazy import lazy_attributes
 
 if TYPE_CHECKING:  # what the lazy names below resolve to, for type checkers and IDEs
     from .bootstrap import Bootstrap, BootstrapConfig, BootstrapResult
+    from .dataset import Task, discover, run_dataset
     from .core import (
         COCO17,
         H36M17,
@@ -58,7 +61,7 @@ if TYPE_CHECKING:  # what the lazy names below resolve to, for type checkers and
     )
     from .synth import SynthConfig, make_scene
 
-__version__ = "0.1.0"
+from ._version import __version__
 
 #: Public name -> the subpackage that defines it (imported when the name is first used).
 _LAZY = {
@@ -70,11 +73,12 @@ _LAZY = {
                      "PoseResult", "load_pose_result", "refine_poses"], ".pose"),
     **dict.fromkeys(["FlowTTT", "SketchConfig"], ".flow"),
     **dict.fromkeys(["Bootstrap", "BootstrapConfig", "BootstrapResult"], ".bootstrap"),
+    **dict.fromkeys(["run_dataset", "discover", "Task"], ".dataset"),
     **dict.fromkeys(["read_video", "read_estimates", "PoseEstimates"], ".data.readers"),
 }  # fmt: skip
 
 #: Subpackages, reachable as attributes (``lit_boot.metrics.epe``) without importing them first.
-_SUBPACKAGES = ("bootstrap", "core", "data", "estimate", "flow", "metrics", "pose", "synth")
+_SUBPACKAGES = ("bootstrap", "core", "data", "dataset", "estimate", "flow", "metrics", "pose", "synth")
 
 __all__ = [*_LAZY, "__version__"]
 

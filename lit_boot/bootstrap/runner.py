@@ -42,7 +42,7 @@ import numpy as np
 import torch
 from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
-from .. import __version__
+from .._version import __version__
 from ..core import Scene
 from ..data import load_scene
 from ..data.atomic import atomic_write_bytes

@@ -1,0 +1,4 @@
+"""The package version (its own module, so that any layer may read it without importing the package's
+lazy API)."""
+
+__version__ = "0.1.0"
