@@ -11,6 +11,8 @@ Commands, one module per group (each imported only when one of its commands runs
 - ``lit-boot bootstrap --config configs/bootstrap.yaml --data.scene DIR [--out RUN]`` (or
   ``--data.video VIDEO``) and ``lit-boot demo`` (:mod:`.runs`): the whole method (flow -> pose
   -> flow) on one scene, resumed when rerun; the demo on a small synthetic scene.
+- ``lit-boot bootstrap-many SOURCE PATH [--out DIR] [--engine local|ray --workers N]``
+  (:mod:`.dataset`): the method on every scene of a dataset, resumable, with a summary table.
 - ``lit-boot fit|validate|predict --config configs/flow_ttt.yaml --data.scene DIR``
   (:mod:`.lightning`): a LightningModule (FlowTTT ...) on one scene through a LightningCLI
   subclass; the run goes to ``runs/<scene>/<model>`` unless ``--trainer.default_root_dir`` says
@@ -63,6 +65,8 @@ COMMANDS: dict[str, Command] = {
                       "read a dataset scene (MPI-Sintel, 3DPW, Human3.6M) or a video into a scene folder"),
     "bootstrap": Command("runs", "bootstrap",
                          "run the method (flow -> pose -> flow) on a scene folder or a video; reruns resume"),
+    "bootstrap-many": Command("dataset", "bootstrap_many",
+                              "run the method on every scene of a dataset (Sintel, 3DPW, H36M, videos); resumable, Ray"),
     "demo": Command("runs", "demo", "make a small synthetic scene, bootstrap it, print EPE and MPJPE before and after"),
     "estimate-pose": Command("importing", "estimate_pose",
                              "MediaPipe Pose on a video: 2D keypoints, 3D joints and cameras to a pose file"),

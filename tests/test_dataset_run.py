@@ -1,0 +1,177 @@
+"""Dataset runs (lit_boot.dataset): engines, the manifest, merged metrics, reruns, lost workers.
+
+Tiny synthetic scene folders (exact GT) and a random-weight RAFT, so no weights file is needed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import threading
+import time
+
+import pytest
+import torch
+
+import lit_boot
+from lit_boot.data import read_flows
+from lit_boot.dataset import Task, run_dataset
+from lit_boot.dataset.engines import LocalEngine, RayEngine
+from lit_boot.dataset.manifest import SettingsChangedError
+from lit_boot.metrics import FlowMetrics
+
+CONFIG = dict(flow_epochs=1, pose_steps=15, video=False, accelerator="cpu",
+              flow={"weights": None, "train_updates": 2, "predict_updates": 3})  # fmt: skip
+SIZES = [(4, 64, 96), (3, 64, 80), (5, 64, 96)]  # frames, height, width: pooling must weigh pixels
+
+
+@pytest.fixture(scope="module")
+def scene_dirs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("scenes")
+    dirs = []
+    for i, (frames, height, width) in enumerate(SIZES):
+        scene = lit_boot.make_scene(motion=("run", "walk", "jump")[i], frames=frames, height=height, width=width, seed=i)
+        lit_boot.save_scene(scene, root / f"s{i}")
+        dirs.append(root / f"s{i}")
+    return dirs
+
+
+def tasks_of(dirs):
+    return [Task(name=d.name, kind="scene", args={"path": str(d)}) for d in dirs]
+
+
+@pytest.fixture(scope="module")
+def reference(scene_dirs, tmp_path_factory):
+    """The tasks in sequence in this process: the result the other engines must reproduce."""
+    out = tmp_path_factory.mktemp("ref") / "data"
+    return run_dataset(tasks_of(scene_dirs), out, CONFIG, workers=0)
+
+
+def pooled_epe(dirs, out, which="final"):
+    """EPE over every pair of every scene in one FlowMetrics: what the merged metrics must equal."""
+    metrics = FlowMetrics()
+    for d in dirs:
+        gt = lit_boot.load_scene(d).gt
+        run = out / "scenes" / d.name
+        flows = read_flows(run / "stages" / "initial" / "flows.npz") if which == "initial" else read_flows(run / "flows")
+        metrics.update(flows, gt.flow, gt.flow_mask(), gt.person_mask[:-1])
+    return {k: float(v) for k, v in metrics.compute().items()}
+
+
+def test_merged_metrics_equal_one_process_over_all_scenes(reference, scene_dirs):
+    assert reference.counts["done"] == 3 and not reference.counts["failed"]
+    for which in ("initial", "final"):
+        pooled = pooled_epe(scene_dirs, reference.out, which)
+        for name in ("epe", "epe_person", "epe_background"):
+            assert reference.metrics[which][name] == pytest.approx(pooled[name], rel=1e-9)
+    per_scene = [r for r in json.loads((reference.out / "manifest.json").read_text())["tasks"].values()]
+    means = sum(r["result"]["before_after"]["epe"][1] for r in per_scene) / len(per_scene)
+    assert abs(means - reference.metrics["final"]["epe"]) > 1e-6  # pooling is not the mean of the scenes
+    table = reference.table()
+    assert all(f"| s{i} " in table for i in range(3)) and "dataset" in table
+    assert (reference.out / "summary.csv").is_file() and (reference.out / "dataset.json").is_file()
+
+
+def test_two_worker_processes_give_the_same_results(reference, scene_dirs, tmp_path):
+    result = run_dataset(tasks_of(scene_dirs), tmp_path / "data", CONFIG, workers=2, threads=1)
+    assert result.counts["done"] == 3
+    for which in ("initial", "final"):
+        for name, value in reference.metrics[which].items():
+            assert result.metrics[which][name] == pytest.approx(value, rel=1e-4, abs=1e-6), (which, name)
+    logs = sorted(p.name for p in (tmp_path / "data" / "tasks").glob("*.log"))
+    assert logs == ["s0.log", "s1.log", "s2.log"]
+
+
+def test_a_rerun_after_completion_runs_nothing(reference, scene_dirs):
+    class Counting(LocalEngine):
+        started: list = []
+
+        def run(self, jobs, on_start, on_end):
+            self.started.extend(j.name for j in jobs)
+            super().run(jobs, on_start, on_end)
+
+    before = (reference.out / "manifest.json").read_text()
+    engine = Counting(workers=0)
+    again = run_dataset(tasks_of(scene_dirs), reference.out, CONFIG, engine=engine)
+    assert engine.started == [] and again.metrics == reference.metrics
+    assert json.loads((reference.out / "manifest.json").read_text())["tasks"] == json.loads(before)["tasks"]
+
+
+def test_other_settings_are_refused_not_mixed(reference, scene_dirs):
+    with pytest.raises(SettingsChangedError, match="flow_epochs"):
+        run_dataset(tasks_of(scene_dirs), reference.out, {**CONFIG, "flow_epochs": 2}, workers=0)
+
+
+def _children_started(log_dir, name):
+    text = (log_dir / f"{name}.log").read_text() if (log_dir / f"{name}.log").is_file() else ""
+    return [int(p) for p in re.findall(rf"task {name}: start \(pid (\d+)\)", text)]
+
+
+def test_a_killed_worker_is_retried_and_nothing_is_lost_or_duplicated(reference, scene_dirs, tmp_path):
+    out = tmp_path / "data"
+    killed = []
+
+    def kill_first_worker_of_s2():
+        deadline = time.time() + 300
+        while time.time() < deadline and not killed:
+            pids = _children_started(out / "tasks", "s2")
+            if pids and (out / "scenes" / "s2" / "stages").is_dir():  # mid-task: its run has begun
+                os.kill(pids[0], signal.SIGKILL)
+                killed.append(pids[0])
+            time.sleep(0.05)
+
+    killer = threading.Thread(target=kill_first_worker_of_s2)
+    killer.start()
+    result = run_dataset(tasks_of(scene_dirs), out, CONFIG, workers=2, threads=1, retries=2)
+    killer.join()
+    assert killed, "the test never saw s2's worker running"
+    tasks = json.loads((out / "manifest.json").read_text())["tasks"]
+    assert {n: r["state"] for n, r in tasks.items()} == {"s0": "done", "s1": "done", "s2": "done"}
+    assert tasks["s2"]["attempts"] == 1 and tasks["s0"]["attempts"] == 0
+    assert len(_children_started(out / "tasks", "s2")) == 2  # killed once, run again once
+    assert len(result.records) == 3
+    for name, value in reference.metrics["final"].items():
+        assert result.metrics["final"][name] == pytest.approx(value, rel=1e-4, abs=1e-6), name
+
+
+def test_a_bad_video_fails_its_own_task_and_the_others_go_on(scene_dirs, tmp_path):
+    bad = tmp_path / "broken.mp4"
+    bad.write_bytes(b"not a video at all")
+    tasks = [*tasks_of(scene_dirs[:1]), Task(name="broken", kind="video", args={"path": str(bad)})]
+    result = run_dataset(tasks, tmp_path / "data", CONFIG, workers=0)
+    tasks = json.loads((tmp_path / "data" / "manifest.json").read_text())["tasks"]
+    assert tasks["s0"]["state"] == "done" and tasks["broken"]["state"] == "failed"
+    assert "broken.mp4" in tasks["broken"]["error"]
+    assert result.counts == {"done": 1, "failed": 1, "pending": 0, "running": 0}
+    assert "broken.mp4" in (tmp_path / "data" / "summary.csv").read_text()
+
+
+def test_chunks_are_stitched_and_counted_once(tmp_path):
+    scene = lit_boot.make_scene(motion="walk", frames=7, height=64, width=96, seed=3)
+    lit_boot.save_scene(scene, tmp_path / "long")
+    task = Task(name="long", kind="scene", args={"path": str(tmp_path / "long")})
+    result = run_dataset([task], tmp_path / "data", CONFIG, workers=0, chunk_frames=4, chunk_overlap=2)
+    tasks = json.loads((tmp_path / "data" / "manifest.json").read_text())["tasks"]
+    chunks = tasks["long"]["chunks"]
+    assert len(chunks) >= 2 and all(tasks[c]["state"] == "done" for c in chunks) and tasks["long"]["state"] == "done"
+    assert [r["name"] for r in result.records] == ["long"] and result.records[0]["frames"] == 7
+    flows = read_flows(tmp_path / "data" / "scenes" / "long" / "flows.npz")
+    assert flows.shape == (6, 2, 64, 96)
+    metrics = FlowMetrics()
+    metrics.update(flows, scene.gt.flow, scene.gt.flow_mask(), scene.gt.person_mask[:-1])
+    assert result.metrics["final"]["epe"] == pytest.approx(float(metrics.compute()["epe"]), rel=1e-9)
+    poses = lit_boot.read_estimates(tmp_path / "data" / "scenes" / "long" / "poses.npz")
+    assert poses.joints3d.shape[0] == 7 and torch.isfinite(poses.joints3d).all()
+
+
+def test_ray_with_a_local_instance_gives_the_same_results(reference, scene_dirs, tmp_path):
+    ray = pytest.importorskip("ray", reason="needs the ray extra")
+    try:
+        result = run_dataset(tasks_of(scene_dirs), tmp_path / "data", CONFIG, engine=RayEngine(workers=2))
+    finally:
+        ray.shutdown()
+    assert result.counts["done"] == 3
+    for name, value in reference.metrics["final"].items():
+        assert result.metrics["final"][name] == pytest.approx(value, rel=1e-4, abs=1e-6), name
