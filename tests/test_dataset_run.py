@@ -175,3 +175,19 @@ def test_ray_with_a_local_instance_gives_the_same_results(reference, scene_dirs,
     assert result.counts["done"] == 3
     for name, value in reference.metrics["final"].items():
         assert result.metrics["final"][name] == pytest.approx(value, rel=1e-4, abs=1e-6), name
+
+
+def test_the_command_prints_the_table_and_only_its_own_lines(reference, scene_dirs, tmp_path, capsys):
+    from lit_boot.cli import main
+
+    flow = json.dumps(CONFIG["flow"])
+    args = ["bootstrap-many", "scenes", str(scene_dirs[0].parent), "--out", str(tmp_path / "data"), "--workers", "0",
+            "--flow_epochs", "1", "--pose_steps", "15", "--video", "false", "--accelerator", "cpu", "--flow", flow]  # fmt: skip
+    assert main(args) == 0
+    out, err = capsys.readouterr()
+    assert "| dataset | 3/3 done |" in out and "3 done; wrote" in out
+    assert "GPU available" not in out + err and "Tip" not in out + err  # Lightning's lines stay in the task logs
+    summary = json.loads((tmp_path / "data" / "dataset.json").read_text())
+    assert summary["metrics"]["final"]["epe"] == pytest.approx(reference.metrics["final"]["epe"], rel=1e-6)
+    assert main(["bootstrap-many", "nonsense", str(tmp_path)]) == 2
+    assert "source 'nonsense'" in capsys.readouterr().err

@@ -12,11 +12,9 @@ import pytest
 import torch
 
 from lit_boot.data import save_scene
-from lit_boot.data.readers import SINTEL_HUMAN_SCENES as READER_HUMAN_SCENES
 from lit_boot.data.readers import DatasetFormatError, PoseEstimates, read_sintel, read_video, save_poses
 from lit_boot.dataset.chunks import plan_chunks, slice_scene
 from lit_boot.dataset.sources import (
-    SINTEL_HUMAN_SCENES,
     discover,
     h36m_tasks,
     manifest_tasks,
@@ -57,10 +55,6 @@ def videos(tmp_path: Path) -> Path:
     (folder / "empty").mkdir()  # no frames: not a video
     (folder / "notes.txt").write_text("not a video")
     return folder
-
-
-def test_sintel_human_subset_is_the_papers() -> None:
-    assert SINTEL_HUMAN_SCENES == READER_HUMAN_SCENES == ("alley_2", "bamboo_2", "cave_2", "cave_4")
 
 
 def test_sintel_selection_on_a_minimal_tree(tmp_path: Path) -> None:

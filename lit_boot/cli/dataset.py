@@ -51,10 +51,10 @@ def bootstrap_many_parser() -> ArgumentParser:
                         help="local: worker processes (one GPU each when there are GPUs; 0 = in this process)")  # fmt: skip
     parser.add_argument("--threads", type=int | None, default=None, help="CPU threads per task (default: cores / workers)")
     parser.add_argument("--retries", type=int, default=2, help="retries of a task whose worker was lost")
-    parser.add_argument("--ray_address", type=str | None, default=None,
+    parser.add_argument("--ray_address", "--ray-address", type=str | None, default=None,
                         help="ray: the cluster to join (e.g. auto or ray://host:10001); default a local instance")  # fmt: skip
-    parser.add_argument("--chunk_frames", type=int | None, default=None, help="split longer scenes into chunks of N frames")
-    parser.add_argument("--chunk_overlap", type=int, default=8, help="frames shared by consecutive chunks")
+    parser.add_argument("--chunk_frames", "--chunk-frames", type=int | None, default=None, help="split longer scenes into chunks of N frames")
+    parser.add_argument("--chunk_overlap", "--chunk-overlap", type=int, default=8, help="frames shared by consecutive chunks")
     parser.add_argument("--overwrite", type=bool, default=False, help="delete the dataset folder's results first")
     parser.add_class_arguments(BootstrapConfig, nested_key=None, as_group=False, skip={"progress_bar"})
     return parser

@@ -23,7 +23,6 @@ from typing import Any
 from .tasks import Task, safe_name
 
 __all__ = [
-    "SINTEL_HUMAN_SCENES",
     "SOURCES",
     "VIDEO_SUFFIXES",
     "discover",
@@ -35,9 +34,6 @@ __all__ = [
     "video_tasks",
 ]
 
-#: The paper's "Sintel human subset" (Sec. 4, Datasets; REFERENCE section 3): final pass, these
-#: four scenes, 49 pairs each (196 in all). The same as lit_boot.data.readers.SINTEL_HUMAN_SCENES.
-SINTEL_HUMAN_SCENES = ("alley_2", "bamboo_2", "cave_2", "cave_4")
 #: Video file suffixes (OpenCV reads them), compared case-insensitively.
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm")
 #: Pose files found beside a video (same stem).
@@ -111,7 +107,8 @@ def sintel_tasks(
     reader_args: dict[str, Any] | None = None,
 ) -> list[Task]:
     """One "sintel" task per scene folder of ``root``/training/``pass_name``: all (None), the
-    given names, or "human": those of :data:`SINTEL_HUMAN_SCENES` present. A scene whose frame
+    given names, or "human": the paper's human subset present
+    (:data:`lit_boot.data.readers.SINTEL_HUMAN_SCENES`). A scene whose frame
     numbers have gaps (a partial copy) gives one task per run of consecutive frames (args
     first / last; named ``<scene>_<first>-<last>``)."""
     if pass_name not in ("clean", "final"):
@@ -119,6 +116,8 @@ def sintel_tasks(
     folder = _folder(Path(root) / "training" / pass_name, f"an MPI-Sintel root holding training/{pass_name}/<scene>/")
     available = sorted(p.name for p in folder.iterdir() if p.is_dir())
     if scenes == "human":
+        from ..data.readers.sintel import SINTEL_HUMAN_SCENES
+
         chosen = [s for s in SINTEL_HUMAN_SCENES if s in available]
         if not chosen:
             raise ValueError(f"{folder}: none of the human scenes {list(SINTEL_HUMAN_SCENES)}; it holds {available}")
