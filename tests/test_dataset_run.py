@@ -44,9 +44,9 @@ def tasks_of(dirs):
 
 @pytest.fixture(scope="module")
 def reference(scene_dirs, tmp_path_factory):
-    """The tasks in sequence in this process: the result the other engines must reproduce."""
+    """The default: one worker process, the tasks in sequence; the others must reproduce it."""
     out = tmp_path_factory.mktemp("ref") / "data"
-    return run_dataset(tasks_of(scene_dirs), out, CONFIG, workers=0)
+    return run_dataset(tasks_of(scene_dirs), out, CONFIG, workers=1, threads=1)
 
 
 def pooled_epe(dirs, out, which="final"):
@@ -188,6 +188,6 @@ def test_the_command_prints_the_table_and_only_its_own_lines(reference, scene_di
     assert "| dataset | 3/3 done |" in out and "3 done; wrote" in out
     assert "GPU available" not in out + err and "Tip" not in out + err  # Lightning's lines stay in the task logs
     summary = json.loads((tmp_path / "data" / "dataset.json").read_text())
-    assert summary["metrics"]["final"]["epe"] == pytest.approx(reference.metrics["final"]["epe"], rel=1e-6)
+    assert summary["metrics"]["final"]["epe"] == pytest.approx(reference.metrics["final"]["epe"], rel=1e-4)
     assert main(["bootstrap-many", "nonsense", str(tmp_path)]) == 2
     assert "source 'nonsense'" in capsys.readouterr().err

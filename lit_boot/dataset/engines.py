@@ -154,7 +154,7 @@ class RayEngine:
         if ray.is_initialized():
             return
         options: dict[str, Any] = {"address": self.address, "include_dashboard": False, "log_to_driver": False,
-                                   "logging_level": logging.WARNING, "configure_logging": True}  # fmt: skip
+                                   "logging_level": logging.ERROR, "configure_logging": True}  # fmt: skip
         if self.address is None and self.workers:
             options["num_cpus"] = self.workers * self.cpus_per_task
         ray.init(**options)
