@@ -75,8 +75,14 @@ def test_merged_metrics_equal_one_process_over_all_scenes(reference, scene_dirs)
 
 
 def test_two_worker_processes_give_the_same_results(reference, scene_dirs, tmp_path):
-    result = run_dataset(tasks_of(scene_dirs), tmp_path / "data", CONFIG, workers=2, threads=1)
+    engine = LocalEngine(workers=2, gpus=["7", "8"])  # on a CPU run the GPU ids are only passed on
+    assert engine.threads == max(1, len(os.sched_getaffinity(0)) // 2)  # the cores split fairly
+    result = run_dataset(tasks_of(scene_dirs), tmp_path / "data", CONFIG, engine=engine)
     assert result.counts["done"] == 3
+    tasks = json.loads((tmp_path / "data" / "manifest.json").read_text())["tasks"]
+    workers = [tasks[f"s{i}"]["result"]["worker"] for i in range(3)]
+    assert {w["gpus"] for w in workers[:2]} == {"7", "8"}  # one GPU per worker slot
+    assert all(w["threads"] == engine.threads for w in workers) and len({w["pid"] for w in workers}) == 3
     for which in ("initial", "final"):
         for name, value in reference.metrics[which].items():
             assert result.metrics[which][name] == pytest.approx(value, rel=1e-4, abs=1e-6), (which, name)

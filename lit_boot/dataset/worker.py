@@ -8,7 +8,8 @@ Lightning's, warnings) go to ``<out>/tasks/<name>.log``, not to the console.
 
 A result: frames, size [H, W], seconds (the run's stages, summed), the run folder, the metric
 states of the initial and the final flows and poses against the scene's ground truth
-(:func:`lit_boot.metrics.scene_metric_states`; {} without GT), and the before/after values.
+(:func:`lit_boot.metrics.scene_metric_states`; {} without GT), the before/after values, and
+where it ran ("worker": pid, visible GPUs, torch threads).
 
 This module imports nothing heavy at import time: a fresh worker process sets its thread count
 and visible GPU (:func:`worker_environment`) before torch is loaded.
@@ -103,13 +104,20 @@ def run_task(task: dict[str, Any], out: str, config: dict[str, Any], threads: in
         log = logging.getLogger("lit_boot.dataset")
         log.info("task %s: start (pid %d)", spec.name, os.getpid())
         try:
-            record = {"state": "done", "result": _bootstrap(spec, run_dir, config)}
+            record = {"state": "done", "result": {**_bootstrap(spec, run_dir, config), "worker": _worker_info()}}
         except Exception as err:  # a bad input fails its own task; the others go on
             log.error("task %s failed:\n%s", spec.name, traceback.format_exc())
             record = {"state": "failed", "error": f"{type(err).__name__}: {err}"}
         log.info("task %s: %s", spec.name, record["state"])
     write_record(record_file, record)
     return record
+
+
+def _worker_info() -> dict[str, Any]:
+    """Where the task ran: the process, its visible GPUs (CUDA_VISIBLE_DEVICES), its torch threads."""
+    import torch
+
+    return {"pid": os.getpid(), "gpus": os.environ.get("CUDA_VISIBLE_DEVICES"), "threads": torch.get_num_threads()}
 
 
 def _bootstrap(task: Any, run_dir: Path, config: dict[str, Any]) -> dict[str, Any]:
