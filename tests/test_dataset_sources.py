@@ -84,13 +84,13 @@ def test_sintel_shared_samples_discover_and_load(shared: Path) -> None:
     with pytest.raises(ValueError, match=r"none of the human scenes \['alley_2', 'bamboo_2', 'cave_2', 'cave_4'\]"):
         sintel_tasks(root, scenes="human")
     task = tasks["alley_1"]
-    scene, direct = task.load(), read_sintel(root, "alley_1")
+    scene, direct = task.load(estimate=False), read_sintel(root, "alley_1")
     assert torch.equal(scene.frames, direct.frames) and torch.equal(scene.gt.flow, direct.gt.flow)
     assert scene.metadata == direct.metadata
-    part = Task("alley_1--00001-00004", "sintel", task.args, frames=(1, 4), parent="alley_1").load()  # numbers 2..4
+    part = Task("alley_1--00001-00004", "sintel", task.args, frames=(1, 4), parent="alley_1").load(estimate=False)
     assert torch.equal(part.gt.flow, direct.gt.flow[1:3]) and torch.equal(part.gt.flow_valid, direct.gt.flow_valid[1:3])
     assert part.metadata["frames"] == [2, 3, 4] and part.metadata["gt_pairs"] == [[2, 3]]
-    window = Task.from_dict(json.loads(json.dumps(tasks["market_5_0008-0011"].to_dict()))).load()
+    window = Task.from_dict(json.loads(json.dumps(tasks["market_5_0008-0011"].to_dict()))).load(estimate=False)
     assert window.metadata["frames"] == [8, 9, 10, 11]
 
 
@@ -179,6 +179,31 @@ def test_video_without_poses_gets_mediapipe_on_its_frames(videos: Path, monkeypa
     scene = task.load()
     assert seen == [[1, 2]] and scene.num_frames == 2 and scene.metadata["pose_estimates"][0]["source"] == "fake"
     assert task.load(estimate=False).keypoints2d is None and len(seen) == 1
+
+
+def test_any_scene_without_estimates_gets_mediapipe_and_a_pose_folder_is_used_first(
+    videos: Path, scenes, tmp_path: Path, monkeypatch
+) -> None:
+    seen = []
+
+    def fake_estimate_poses(scene):
+        seen.append(scene.num_frames)
+        T = scene.num_frames
+        return PoseEstimates(keypoints2d=torch.full((T, 17, 2), 3.0), keypoints_conf=torch.ones(T, 17),
+                             image_size=(scene.height, scene.width), source="fake")  # fmt: skip
+
+    monkeypatch.setattr("lit_boot.estimate.estimate_poses", fake_estimate_poses)
+    folder = tmp_path / "poses"
+    folder.mkdir()
+    save_poses(_poses(6), folder / "clip.npz")
+    tasks = {t.name: t for t in discover("videos", videos, poses=folder)}
+    assert tasks["clip"].poses == str(folder / "clip.npz") and tasks["Other"].poses is None
+    assert torch.equal(tasks["clip"].load().keypoints2d, _poses(6).keypoints2d) and seen == []
+    assert tasks["Other"].load().metadata["pose_estimates"][0]["source"] == "fake" and len(seen) == 1
+    own = discover("scenes", scenes[0])[0].load()  # a scene with estimates of its own keeps them
+    assert own.joints3d is not None and len(seen) == 1
+    with pytest.raises(ValueError, match="no pose file named after any scene"):
+        discover("videos", videos, poses=tmp_path)
 
 
 def test_bad_videos_name_the_file(tmp_path: Path) -> None:

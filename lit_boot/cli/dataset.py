@@ -16,7 +16,7 @@ from pathlib import Path
 
 from jsonargparse import ActionConfigFile
 
-from .console import ArgumentParser
+from .console import ArgumentParser, CliError
 
 __all__ = ["bootstrap_many", "bootstrap_many_parser", "SOURCES"]
 
@@ -45,6 +45,12 @@ def bootstrap_many_parser() -> ArgumentParser:
                         help="sintel: scene names (comma-separated) or 'human'; 3dpw: sequences; h36m: actions")  # fmt: skip
     parser.add_argument("--split", type=str, default="test", help="3dpw: train, validation or test")
     parser.add_argument("--subjects", type=str, default="S9,S11", help="h36m: subjects (comma-separated)")
+    parser.add_argument("--poses", type=Path | None, default=None,
+                        help="a folder of pose files named after the scenes (<name>.npz / .json); a scene with "
+                             "none and no estimates of its own gets MediaPipe Pose")  # fmt: skip
+    parser.add_argument("--reader", type=dict | None, default=None,
+                        help="reader arguments for every scene, e.g. '{size: [218, 512]}' (sintel, 3dpw) or "
+                             "'{resize: 360}' (videos)")  # fmt: skip
     parser.add_argument("--out", type=Path | None, default=None, help="dataset folder (default runs/<source>_<name>)")
     parser.add_argument("--engine", type=str, default="local", help="local or ray")
     parser.add_argument("--workers", type=int, default=1,
@@ -62,19 +68,26 @@ def bootstrap_many_parser() -> ArgumentParser:
 
 def _options(args) -> dict:
     """discover()'s options of the chosen source."""
+    from ..dataset.sources import READER_SOURCES
+
     source, scenes = args.source, _names(args.scenes)
+    options = {"poses": args.poses}
+    if args.reader:
+        if source not in READER_SOURCES:
+            raise CliError(f"--reader: only for sources {', '.join(READER_SOURCES)} (not {source})")
+        options["reader_args"] = dict(args.reader)
     if source == "sintel":
-        return {"scenes": scenes}
+        return {**options, "scenes": scenes}
     if source == "3dpw":
-        return {"split": args.split, "sequences": scenes}
+        return {**options, "split": args.split, "sequences": scenes}
     if source == "h36m":
-        return {"subjects": tuple(_names(args.subjects) or ()), "actions": scenes}
-    return {}
+        return {**options, "subjects": tuple(_names(args.subjects) or ()), "actions": scenes}
+    return options
 
 
 def bootstrap_many(argv: list[str]) -> int:
     """``lit-boot bootstrap-many``: discover the tasks, run (or resume) them, print the summary."""
-    from .console import CliError, dataclass_from
+    from .console import dataclass_from
 
     args = bootstrap_many_parser().parse_args(argv)
     if args.source not in SOURCES:

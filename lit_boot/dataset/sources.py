@@ -32,14 +32,16 @@ __all__ = [
     "scene_tasks",
     "sintel_tasks",
     "video_tasks",
+    "with_pose_files",
 ]
 
 #: Video file suffixes (OpenCV reads them), compared case-insensitively.
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm")
 #: Pose files found beside a video (same stem).
 POSE_SUFFIXES = (".npz", ".json")
-#: Sources of :func:`discover`.
+#: Sources of :func:`discover`; those whose functions take ``reader_args``.
 SOURCES = ("sintel", "3dpw", "h36m", "videos", "list", "scenes")
+READER_SOURCES = ("sintel", "3dpw", "h36m", "videos")
 #: Task args that hold paths (made absolute, relative to a list file's folder).
 PATH_ARGS = ("path", "root", "video", "positions_3d", "positions_2d")
 _SINTEL_FRAME = re.compile(r"^frame_(\d+)\.png$")
@@ -320,10 +322,11 @@ def manifest_tasks(path: str | os.PathLike) -> list[Task]:
     return _text_manifest(path)
 
 
-def discover(source: str, path: str | os.PathLike, **options: Any) -> list[Task]:
+def discover(source: str, path: str | os.PathLike, poses: str | os.PathLike | None = None, **options: Any) -> list[Task]:
     """The tasks of ``source`` at ``path``: "sintel" (:func:`sintel_tasks`), "3dpw"
     (:func:`pw3d_tasks`), "h36m" (:func:`h36m_tasks`), "videos" (:func:`video_tasks`), "list"
-    (:func:`manifest_tasks`) or "scenes" (:func:`scene_tasks`); ``options`` go to that function."""
+    (:func:`manifest_tasks`) or "scenes" (:func:`scene_tasks`); ``options`` go to that function.
+    ``poses``: a folder of pose files named after the tasks (see :func:`with_pose_files`)."""
     functions = {"sintel": sintel_tasks, "3dpw": pw3d_tasks, "h36m": h36m_tasks, "videos": video_tasks,
                  "list": manifest_tasks, "scenes": scene_tasks}  # fmt: skip
     if source not in functions:
@@ -332,4 +335,25 @@ def discover(source: str, path: str | os.PathLike, **options: Any) -> list[Task]
         inspect.signature(functions[source]).bind(path, **options)
     except TypeError as err:
         raise ValueError(f"discover {source!r}: bad options {sorted(options)}: {err}") from None
-    return functions[source](path, **options)
+    tasks = functions[source](path, **options)
+    return with_pose_files(tasks, poses) if poses is not None else tasks
+
+
+def with_pose_files(tasks: list[Task], folder: str | os.PathLike) -> list[Task]:
+    """``tasks`` with the pose file ``<folder>/<task name>.npz`` or ``.json`` (or a folder
+    ``<folder>/<task name>/`` of per-frame files, e.g. METRO's) as their ``poses``, where one
+    exists; the others unchanged. FileNotFoundError if ``folder`` is missing, ValueError if it
+    holds no pose file of any task."""
+    import dataclasses
+
+    folder = _folder(folder, "a folder of pose files named after the scenes")
+    out, found = [], 0
+    for task in tasks:
+        candidates = [folder / f"{task.name}{suffix}" for suffix in POSE_SUFFIXES] + [folder / task.name]
+        match = next((c for c in candidates if c.exists()), None)
+        found += match is not None
+        out.append(dataclasses.replace(task, poses=str(match)) if match is not None else task)
+    if tasks and not found:
+        names = ", ".join(t.name for t in tasks[:3]) + (", ..." if len(tasks) > 3 else "")
+        raise ValueError(f"{folder}: no pose file named after any scene (expected e.g. {tasks[0].name}.npz; scenes: {names})")
+    return out

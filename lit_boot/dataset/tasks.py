@@ -41,8 +41,8 @@ class Task:
 
     name: unique in the run, a file name (its run folder is ``<out>/scenes/<name>``); kind: one
     of :data:`KINDS`; args: the source's arguments (JSON values; paths as strings); poses: a
-    pose file to attach (None: the source's own estimates, or MediaPipe Pose for a video
-    without them); frames: [start, stop) of the source's frames for a chunk, None for all;
+    pose file to attach (None: the source's own estimates, or MediaPipe Pose for a source
+    without any); frames: [start, stop) of the source's frames for a chunk, None for all;
     parent: the whole scene's name when this task is a chunk of it.
     """
 
@@ -83,9 +83,10 @@ class Task:
     def load(self, *, estimate: bool = True) -> Scene:
         """Read the task's scene: the source by kind ("scene": :func:`~lit_boot.data.load_scene`;
         the others: their reader with ``args``), then ``poses`` attached (any pose file
-        :func:`~lit_boot.data.readers.read_estimates` reads; a video without one gets MediaPipe
-        Pose, run on the task's frames only, unless ``estimate`` is False, e.g. to count the
-        frames), then ``frames`` [start, stop) cut out
+        :func:`~lit_boot.data.readers.read_estimates` reads; a scene with no pose file and no
+        estimates of its own, e.g. a video or a Sintel scene, gets MediaPipe Pose, run on the
+        task's frames only, unless ``estimate`` is False, e.g. to count the frames), then
+        ``frames`` [start, stop) cut out
         (:func:`~lit_boot.dataset.chunks.slice_scene`). A video chunk decodes source frames only
         up to ``stop``; the other kinds read the whole scene, then cut.
 
@@ -102,7 +103,7 @@ class Task:
                 raise ValueError(f"task {self.name!r}: frames [{start}, {stop}) but the source has "
                                  f"{scene.num_frames} frames")  # fmt: skip
             scene = slice_scene(scene, start, stop)
-        if self.kind == "video" and self.poses is None and estimate:
+        if estimate and self.poses is None and scene.keypoints2d is None and scene.joints3d is None:
             from ..estimate import estimate_poses
 
             scene = estimate_poses(scene).apply_to(scene)  # rows matched by metadata["frame_indices"]
