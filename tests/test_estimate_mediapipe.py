@@ -14,7 +14,8 @@ import pytest
 import torch
 
 from lit_boot.cli import main
-from lit_boot.core import LSP14, MEDIAPIPE33, Cameras, map_joints
+import lit_boot
+from lit_boot.core import COCO17, LSP14, MEDIAPIPE33, Cameras, map_joints
 from lit_boot.core.joints import MEDIAPIPE33_TO_COCO17
 from lit_boot.data.readers.pose_file import load_poses
 from lit_boot.estimate import (
@@ -125,7 +126,7 @@ def test_frames_without_a_person_are_kept_with_zero_confidence_and_filled():
     conf = torch.full((T, 33), 0.8)
     found = torch.tensor([True, True, False, True, True])
     landmarks[2], conf[2], world[2] = 0.0, 0.0, 0.0
-    landmarks[4] += 1000.0  # jumps far away: another person?
+    landmarks[4] += 300.0  # jumps far away: another person?
     est = poses_from_landmarks(landmarks, conf, world, found, (480, 640), torch.arange(10, 15))
     assert est.num_frames == T and est.source == "mediapipe-0.10.14" and est.image_size == (480, 640)
     assert torch.equal(est.found(), found)
@@ -139,6 +140,21 @@ def test_frames_without_a_person_are_kept_with_zero_confidence_and_filled():
     assert torch.equal(dropped.joints3d[4], dropped.joints3d[3])
     nobody = poses_from_landmarks(landmarks * 0, conf * 0, world, torch.zeros(T, dtype=torch.bool), (480, 640))
     assert nobody.cameras is None and (nobody.keypoints_conf == 0).all() and len(nobody.metadata["missing_frames"]) == T
+
+
+def test_keypoints_far_outside_the_frame_are_dropped_not_refused():
+    T = 4
+    landmarks = torch.rand(T, 33, 2, generator=torch.Generator().manual_seed(1)) * 50 + 100
+    conf = torch.full((T, 33), 0.8)
+    landmarks[1, 27:33, 1] = 2 * 218 + 1.0  # a cut-off leg's ankles and feet, extrapolated below the frame
+    landmarks[2] += 2000.0  # every keypoint far outside: nobody in this frame
+    landmarks[3, 23:33, 1] = -218 - 5.0  # hips and legs far above the frame: no person in the picture
+    est = poses_from_landmarks(landmarks, conf, _world(T), torch.ones(T, dtype=torch.bool), (218, 512))
+    ankles = [COCO17.names.index(n) for n in ("left_ankle", "right_ankle")]
+    assert (est.keypoints_conf[1, ankles] == 0).all() and (est.keypoints_conf[1, :15] > 0).all()
+    assert est.found().tolist() == [True, True, False, False] and est.metadata["far_outside_dropped"] == 2 + 17 + 17
+    scene = lit_boot.make_scene(motion="run", frames=T, height=218, width=512, seed=0)
+    assert est.apply_to(scene).keypoints2d.shape == (T, 17, 2)  # the scene's check accepts them now
 
 
 def test_missing_mediapipe_gives_the_pip_command(monkeypatch, tmp_path, capsys):

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..core.joints import COCO17
 from ..core.scene import Scene
 from ..data.readers.pose_file import PoseEstimates, save_poses
 from .tracking import JUMP_POLICIES, drop_jumps, find_jumps
@@ -138,6 +139,23 @@ def run_mediapipe(
     return out
 
 
+#: COCO-17 shoulders and hips: the torso that anchors a detection in the picture.
+TORSO = tuple(COCO17.names.index(n) for n in ("left_shoulder", "right_shoulder", "left_hip", "right_hip"))
+
+
+def _drop_far_outside(keypoints: torch.Tensor, conf: torch.Tensor, image_size: tuple[int, int]) -> tuple[torch.Tensor, int]:
+    """Confidence 0 for COCO-17 keypoints (T, 17, 2) px more than one image size outside the frame:
+    MediaPipe extrapolates body parts that are out of the picture (a cut-off leg's ankle),
+    sometimes with a visibility above 0. A frame whose torso (a shoulder or a hip) lies that far
+    out holds no person in the picture: all its confidences become 0. Returns the new
+    confidences and how many keypoints were dropped."""
+    H, W = image_size
+    x, y = keypoints[..., 0], keypoints[..., 1]
+    far = ((x < -W) | (x > 2 * W) | (y < -H) | (y > 2 * H)) & (conf > 0)
+    far = far | (far[:, list(TORSO)].any(-1, keepdim=True) & (conf > 0))
+    return torch.where(far, torch.zeros_like(conf), conf), int(far.sum())
+
+
 def poses_from_landmarks(
     landmarks: torch.Tensor,
     confidence: torch.Tensor,
@@ -163,6 +181,8 @@ def poses_from_landmarks(
     frame_indices = torch.arange(T, dtype=torch.int64) if frame_indices is None else frame_indices.long()
     found = found.bool() & (confidence > 0).any(-1)
     keypoints, conf = landmarks_to_coco17(landmarks.float(), confidence.float())
+    conf, far = _drop_far_outside(keypoints, conf, image_size)
+    found = found & (conf > 0).any(-1)  # a frame whose keypoints all lie far outside has nobody
     if on_jump == "drop":
         jumps, found = drop_jumps(keypoints, conf, found, max_jump)
     else:
@@ -180,6 +200,7 @@ def poses_from_landmarks(
         "missing_frames": [int(frame_indices[t]) for t in range(T) if not found[t]],
         "filled_from": filled,
         "jumps": [int(frame_indices[t]) for t in jumps],
+        "far_outside_dropped": far,
         "on_jump": on_jump,
         "max_jump": max_jump,
         "keypoints_conf": "MediaPipe landmark visibility (x presence when reported); 0 = nobody found",
