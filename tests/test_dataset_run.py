@@ -115,8 +115,8 @@ def _children_started(log_dir, name):
     return [int(p) for p in re.findall(rf"task {name}: start \(pid (\d+)\)", text)]
 
 
-def test_a_killed_worker_is_retried_and_nothing_is_lost_or_duplicated(reference, scene_dirs, tmp_path):
-    out = tmp_path / "data"
+def _run_killing_s2_once(out, **run):
+    """run_dataset(**run) into ``out`` while a thread SIGKILLs s2's first worker mid-task."""
     killed = []
 
     def kill_first_worker_of_s2():
@@ -130,14 +130,22 @@ def test_a_killed_worker_is_retried_and_nothing_is_lost_or_duplicated(reference,
 
     killer = threading.Thread(target=kill_first_worker_of_s2)
     killer.start()
-    result = run_dataset(tasks_of(scene_dirs), out, CONFIG, workers=2, threads=1, retries=2)
-    killer.join()
+    try:
+        result = run_dataset(out=out, **run)
+    finally:
+        killer.join()
     assert killed, "the test never saw s2's worker running"
     tasks = json.loads((out / "manifest.json").read_text())["tasks"]
     assert {n: r["state"] for n, r in tasks.items()} == {"s0": "done", "s1": "done", "s2": "done"}
-    assert tasks["s2"]["attempts"] == 1 and tasks["s0"]["attempts"] == 0
     assert len(_children_started(out / "tasks", "s2")) == 2  # killed once, run again once
     assert len(result.records) == 3
+    return result, tasks
+
+
+def test_a_killed_worker_is_retried_and_nothing_is_lost_or_duplicated(reference, scene_dirs, tmp_path):
+    result, tasks = _run_killing_s2_once(tmp_path / "data", tasks=tasks_of(scene_dirs), config=CONFIG, workers=2,
+                                         threads=1, retries=2)  # fmt: skip
+    assert tasks["s2"]["attempts"] == 1 and tasks["s0"]["attempts"] == 0
     for name, value in reference.metrics["final"].items():
         assert result.metrics["final"][name] == pytest.approx(value, rel=1e-4, abs=1e-6), name
 
@@ -172,15 +180,21 @@ def test_chunks_are_stitched_and_counted_once(tmp_path):
     assert poses.joints3d.shape[0] == 7 and torch.isfinite(poses.joints3d).all()
 
 
-def test_ray_with_a_local_instance_gives_the_same_results(reference, scene_dirs, tmp_path):
+def test_ray_with_a_local_instance_gives_the_same_results_and_retries_a_killed_worker(
+    reference, scene_dirs, tmp_path
+):
     ray = pytest.importorskip("ray", reason="needs the ray extra")
     try:
         result = run_dataset(tasks_of(scene_dirs), tmp_path / "data", CONFIG, engine=RayEngine(workers=2))
+        assert result.counts["done"] == 3
+        for name, value in reference.metrics["final"].items():
+            assert result.metrics["final"][name] == pytest.approx(value, rel=1e-4, abs=1e-6), name
+        again, _ = _run_killing_s2_once(tmp_path / "killed", tasks=tasks_of(scene_dirs), config=CONFIG,
+                                        engine=RayEngine(workers=2, retries=2))  # Ray retries the lost task
+        for name, value in result.metrics["final"].items():
+            assert again.metrics["final"][name] == pytest.approx(value, rel=1e-4, abs=1e-6), name
     finally:
         ray.shutdown()
-    assert result.counts["done"] == 3
-    for name, value in reference.metrics["final"].items():
-        assert result.metrics["final"][name] == pytest.approx(value, rel=1e-4, abs=1e-6), name
 
 
 def test_the_command_prints_the_table_and_only_its_own_lines(reference, scene_dirs, tmp_path, capsys):
