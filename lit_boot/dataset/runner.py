@@ -39,6 +39,7 @@ from .manifest import MANIFEST_JSON, Manifest
 from .stitch import stitch_parent
 from .summary import dataset_metrics, write_summary
 from .tasks import Task
+from .worker import task_files
 
 __all__ = ["run_dataset", "DatasetResult"]
 
@@ -175,7 +176,7 @@ def _run_tasks(manifest: Manifest, engine: Any, out: Path, config: dict, retries
         else:
             manifest.mark(name, state, **{k: v for k, v in record.items() if k != "state"})
             if state == "failed":
-                log.warning("task %s failed: %s", name, record["error"])
+                log.warning("task %s failed: %s (log: %s)", name, record["error"], task_files(out, name)[2])
         bar.update(1)
         bar.set_postfix(manifest.counts(), refresh=True)
 
