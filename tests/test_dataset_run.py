@@ -9,8 +9,11 @@ import json
 import os
 import re
 import signal
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 import torch
@@ -211,3 +214,40 @@ def test_the_command_prints_the_table_and_only_its_own_lines(reference, scene_di
     assert summary["metrics"]["final"]["epe"] == pytest.approx(reference.metrics["final"]["epe"], rel=1e-4)
     assert main(["bootstrap-many", "nonsense", str(tmp_path)]) == 2
     assert "source 'nonsense'" in capsys.readouterr().err
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return not Path(f"/proc/{pid}/stat").is_file() or Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+
+
+def test_a_killed_driver_takes_its_workers_along_and_a_rerun_completes(scene_dirs, tmp_path):
+    out = tmp_path / "data"
+    args = [sys.executable, "-m", "lit_boot.cli", "bootstrap-many", "scenes", str(scene_dirs[0].parent), "--out",
+            str(out), "--workers", "2", "--threads", "1", "--flow_epochs", "1", "--video", "false", "--accelerator",
+            "cpu", "--flow", json.dumps(CONFIG["flow"]),
+            "--pose_steps", "1500", "--early_stop", "false"]  # a pose stage of seconds: the tasks outlast the kill  # fmt: skip
+    driver = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline, running = time.time() + 300, []
+    while time.time() < deadline and not running:  # one task done, another one mid-run
+        done = [n for n in ("s0", "s1", "s2") if (out / "tasks" / f"{n}.json").is_file()]
+        running = [pid for n in ("s0", "s1", "s2") if n not in done and (out / "scenes" / n / "stages").is_dir()
+                   for pid in _children_started(out / "tasks", n)] if done else []  # fmt: skip
+        time.sleep(0.05)
+    assert running, "never saw one task done and another running"
+    driver.send_signal(signal.SIGKILL)
+    driver.wait()
+    deadline = time.time() + 3  # the workers' watch polls every second
+    while time.time() < deadline and any(_alive(pid) for pid in running):
+        time.sleep(0.1)
+    assert not any(_alive(pid) for pid in running), "a worker outlived its killed driver"
+    assert not all((out / "tasks" / f"{n}.json").is_file() for n in ("s0", "s1", "s2"))
+    rerun = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    assert rerun.returncode == 0, rerun.stderr[-2000:]
+    tasks = json.loads((out / "manifest.json").read_text())["tasks"]
+    assert {n: r["state"] for n, r in tasks.items()} == {"s0": "done", "s1": "done", "s2": "done"}
+    assert "| dataset | 3/3 done |" in rerun.stdout and "2 done" not in rerun.stdout
+    assert all(r["result"]["frames"] == SIZES[i][0] for i, r in enumerate(tasks.values()))

@@ -61,8 +61,25 @@ def visible_gpus() -> list[str]:
     return [str(i) for i in range(torch.cuda.device_count())]
 
 
+def _exit_with_parent(poll_s: float = 1.0) -> None:
+    """End this process (at once, as a kill would) when its parent is gone: a driver killed with
+    SIGKILL leaves no worker running on, so its rerun finds the task's run folder free."""
+    import threading
+
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="lit-boot parent watch", daemon=True).start()
+
+
 def _child(job: Job, threads: int, gpu: str | None) -> None:
-    """A worker process: its output goes to the task's log file; the record to its record file."""
+    """A worker process: its output goes to the task's log file; the record to its record file;
+    it ends when the driver does."""
+    _exit_with_parent()
     _, _, log_file = task_files(job.out, job.name)
     log_file.parent.mkdir(parents=True, exist_ok=True)
     fd = os.open(log_file, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
