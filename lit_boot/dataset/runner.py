@@ -69,19 +69,23 @@ def _settings(config: BootstrapConfig, chunk_frames: int | None, chunk_overlap: 
     return {"lit_boot": __version__, "config": cfg, "chunk_frames": chunk_frames, "chunk_overlap": chunk_overlap}
 
 
-def _check_folder(out: Path, overwrite: bool) -> None:
-    """Refuse a path that is not a folder, or a non-empty folder holding no dataset run; with
-    ``overwrite`` clear a dataset run found there (nothing else is ever deleted)."""
+def _check_folder(out: Path) -> list[Path]:
+    """Refuse a path that is not a folder, or a non-empty folder holding no dataset run; return
+    what the folder holds (the lock file aside)."""
     if out.exists() and not out.is_dir():
         raise FileExistsError(f"{out}: exists and is not a folder (choose another output folder)")
     if not out.is_dir():
-        return
+        return []
     entries = [e for e in out.iterdir() if e.name != LOCK_FILE]
     if entries and not (out / MANIFEST_JSON).is_file():
         raise FileExistsError(f"{out}: exists, is not empty and holds no lit-boot dataset run (choose another folder)")
-    if overwrite:
-        for entry in entries:
-            shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+    return entries
+
+
+def _clear(entries: list[Path]) -> None:
+    """Delete a dataset run's files (``overwrite``; called holding the folder's lock)."""
+    for entry in entries:
+        shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
 
 
 def _plan(manifest: Manifest, tasks: list[Task], chunk_frames: int | None, chunk_overlap: int) -> None:
@@ -137,12 +141,13 @@ def run_dataset(
         raise ValueError("no tasks: the dataset source gave no scene")
     out = Path(out)
     runner = engine if not isinstance(engine, str) else make_engine(engine, workers, ray_address, retries, threads)
-    _check_folder(out, overwrite)
+    _check_folder(out)
     with RunLock(out):
+        if overwrite:
+            _clear(_check_folder(out))
         manifest = Manifest.open(out, _settings(config, chunk_frames, chunk_overlap), overwrite=overwrite)
         _plan(manifest, tasks, chunk_frames, chunk_overlap)
-        job_config = {k: v for k, v in config.to_dict().items()}
-        _run_tasks(manifest, runner, out, job_config, retries, progress)
+        _run_tasks(manifest, runner, out, config.to_dict(), retries, progress)
         _stitch(manifest, out, config.mode)
         return _finish(manifest, out)
 

@@ -11,6 +11,7 @@ annotation files that list persons / actions); frames are read by :meth:`Task.lo
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import json
 import os
@@ -344,8 +345,6 @@ def with_pose_files(tasks: list[Task], folder: str | os.PathLike) -> list[Task]:
     ``<folder>/<task name>/`` of per-frame files, e.g. METRO's) as their ``poses``, where one
     exists; the others unchanged. FileNotFoundError if ``folder`` is missing, ValueError if it
     holds no pose file of any task."""
-    import dataclasses
-
     folder = _folder(folder, "a folder of pose files named after the scenes")
     out, found = [], 0
     for task in tasks:
