@@ -17,7 +17,7 @@ tuned and checked flows, pooled over pixels per scene; then the mean relative ch
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/selfcheck_check.py [--scenes 0,1,2,3,4,5,6,7] [--frames 8]
-      [--height 128] [--width 256] [--epochs 8] [--margins 0,0.02,0.05] [--windows 3,5,9]
+      [--height 128] [--width 256] [--mode 3d|2d] [--epochs 8 (3d) / 50 (2d)] [--margins 0,0.02,0.05] [--windows 3,5,9]
       [--tile 32] [--blend 1] [--gate] [--flow JSON] [--sintel alley_1,market_5] [--sintel-size 218,512]
       [--sintel-epochs 8] [--seed 0] [--out /tmp/selfcheck_check] [--fresh]
 Scenes are benchmarks/bootstrap_suite.py's (index = its seed). ``--gate`` makes the targets with
@@ -83,7 +83,7 @@ def agreement(scene, initial, tuned, person, record, weight, tie: float) -> dict
 
 def run_scene(name: str, scene, mode: str, epochs: int, args) -> dict:
     """Initial and tuned flows and the person region of one bootstrap run (flow_1 only), cached."""
-    tag = ("_gate" if args.gate else "") + ("_" + args.flow.replace(" ", "").replace('"', "") if args.flow != "{}" else "")
+    tag = ("_gate" if args.gate else "") + ("_2d" if mode == "2d" and scene.gt.person_mask is not None else "") + ("_" + args.flow.replace(" ", "").replace('"', "") if args.flow != "{}" else "")
     cache = Path(args.out) / f"{name}{tag}.pt"
     if cache.is_file() and not args.fresh:
         return torch.load(cache)
@@ -157,7 +157,8 @@ def main() -> None:
     p.add_argument("--frames", type=int, default=8)
     p.add_argument("--height", type=int, default=128)
     p.add_argument("--width", type=int, default=256)
-    p.add_argument("--epochs", type=int, default=8)
+    p.add_argument("--epochs", type=int, default=None, help="flow_1's epochs (default: 8 in 3D mode, 50 in 2D)")
+    p.add_argument("--mode", default="3d", choices=("3d", "2d"), help="the synthetic scenes' mode")
     p.add_argument("--margins", default="0,0.02,0.05")
     p.add_argument("--windows", default="3,5,9")
     p.add_argument("--tile", type=int, default=32)
@@ -178,7 +179,7 @@ def main() -> None:
     for i in [int(s) for s in args.scenes.split(",") if s]:
         name, spec = SCENES[i]
         scene = make_scene(frames=args.frames, height=args.height, width=args.width, **spec)
-        runs[name] = scene, run_scene(name, scene, "3d", args.epochs, args)
+        runs[name] = scene, run_scene(name, scene, args.mode, args.epochs, args)
     size = tuple(int(v) for v in args.sintel_size.split(","))
     for name in [s for s in args.sintel.split(",") if s]:
         scene = sintel_scene(name, size)

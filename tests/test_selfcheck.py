@@ -241,3 +241,31 @@ def test_only_the_tiles_where_the_flows_differ_are_measured_and_the_decisions_ar
     assert changed_box(initial[0], tuned[0], TILE, 6) == (0, 96, 32, 128)  # rows 14..76, cols 34..106: out to tiles
     assert changed_box(initial[1], tuned[1], TILE, 6) is None
     assert record["per_pair"][1]["regions"] == {} and 0 < len(record["per_pair"][0]["regions"]) < 15
+
+
+def test_with_own_a_pixel_its_window_favours_still_needs_its_own_error_lower():
+    initial = torch.ones(24, 24)
+    tuned = torch.ones(24, 24)
+    tuned[6:18, 6:18] = 0.2  # the limb: the tuned flow explains it far better
+    ring = torch.zeros(24, 24, dtype=torch.bool)
+    ring[5:19, 5:19] = True
+    ring[6:18, 6:18] = False
+    tuned[ring] = 1.5  # the band beside it: worse, but its 5x5 box holds limb pixels
+    every = torch.ones(24, 24, dtype=torch.bool)
+    swayed = choose_pixels(initial, tuned, every, every, 5, 0.02)
+    own = choose_pixels(initial, tuned, every, every, 5, 0.02, own=True)
+    assert swayed[ring].float().mean() > 0.5  # the window alone gives the band the tuned flow
+    assert not own[ring].any()  # its own error says no
+    assert own[6:18, 6:18].all()  # the limb keeps it
+    flows, record, _ = self_check(torch.zeros(2, 3, 24, 24, dtype=torch.uint8), torch.zeros(1, 2, 24, 24),
+                                  torch.ones(1, 2, 24, 24), every[None], own=True)  # fmt: skip
+    assert record["own"] is True
+
+
+def test_the_person_rule_is_the_presets_for_the_mode_unless_given():
+    assert BootstrapConfig(mode="3d").check_setting("own") is True and BootstrapConfig(mode="3d").check_setting("blend") == 0
+    assert BootstrapConfig(mode="2d").check_setting("own") is False and BootstrapConfig(mode="2d").check_setting("blend") == 1
+    assert BootstrapConfig(mode="2d", self_check_own=True, self_check_blend=0).check_setting("own") is True
+    assert BootstrapConfig(mode="3d", self_check_blend=2).check_setting("blend") == 2
+    assert BootstrapConfig(mode="3d").flow_kwargs()["sketch_gap"] == 2.0
+    assert "sketch_gap" not in BootstrapConfig(mode="2d").flow_kwargs()

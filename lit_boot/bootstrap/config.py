@@ -11,7 +11,8 @@ Presets (``BootstrapConfig.preset``):
   450 px tall, as on Human3.6M; never below 2 px), since a fixed 30 px square paints most
   of a small person and the background around it; the self-check on; and the fast fine-tune
   (:mod:`lit_boot.flow.warm`: frozen cached encoders, 2 update iterations per step from RAFT's
-  own flow on a crop around the person, lr 3e-5 (2e-5 in 2D mode), the sketch's pixels 5x; in
+  own flow on a crop around the person, lr 3e-5 (2e-5 in 2D mode), the sketch's pixels 5x and
+  no loss within 2 footprint radii beside them; in
   2D mode the fit stops when its loss stops falling, and backpropagates through the last update
   only).
   Everything else as ``paper``.
@@ -49,21 +50,26 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                     "train_updates": 20, "freeze_batchnorm": False, "lr": 1e-5},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
-        "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off"},
+        "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off",
+                    "self_check_3d": {"own": False, "blend": 1}, "self_check_2d": {"own": False, "blend": 1}},
     },
     "default": {
         # the fast fine-tune (lit_boot.flow.warm): frozen cached encoders, 2 updates from RAFT's own
-        # flow on a crop around the person, pasted into RAFT's flow; the sketch's
-        # pixels weigh 5x in a SmoothL1 with beta 0.1; in 2D (50 epochs) the fit stops when its
+        # flow on a crop around the person, pasted into RAFT's flow; the sketch's pixels weigh
+        # 5x in a SmoothL1 with beta 0.1, the unpainted ones within 2 footprint radii of it not at
+        # all (they may be the limb's: sketch_gap); in 2D (50 epochs) the fit stops when its
         # loss stops falling and backpropagates through the last update only; the self-check
         # holds the background (BENCHMARKS.md, "Speed" and "Do no harm")
         "flow_3d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
-                    "sketch_weight": 5.0, "loss_beta": 0.1},
+                    "sketch_weight": 5.0, "loss_beta": 0.1, "sketch_gap": 2.0},
         "flow_2d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 2e-5,
                     "sketch_weight": 5.0, "loss_beta": 0.1, "plateau_patience": 3, "grad_updates": 1},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
-        "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric"},
+        "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric",
+                    # the self-check's person rule per mode: with the unknown zone beside the sketch
+                    # (3D), a pixel's own error decides too and nothing is blended
+                    "self_check_3d": {"own": True, "blend": 0}, "self_check_2d": {"own": False, "blend": 1}},
     },
 }  # fmt: skip
 
@@ -94,7 +100,8 @@ class BootstrapConfig:
             the person's height in the video (at least 2 px); the self-check on; the fast
             fine-tune (2 warm RAFT updates per step on a crop, frozen encoders, lr 3e-5; lr
             2e-5, the plateau stop and gradients through the last update in 2d mode) with the
-            sketch's pixels 5x in the loss (SmoothL1 beta 0.1). paper: the authors' code, 30x30 px
+            sketch's pixels 5x in the loss (SmoothL1 beta 0.1) and none on the unpainted
+            pixels within 2 footprint radii of them. paper: the authors' code, 30x30 px
             squares (6x6 in 2d mode) at 22 points per bone, whatever the person's size, 20 RAFT
             updates in training from zero, every weight trained, lr 1e-5. Both: loss on the
             final prediction, binary confidences, 16-bit mixed precision on CUDA. --flow and
@@ -138,7 +145,12 @@ class BootstrapConfig:
         self_check_window: the box (px) over which each person pixel's errors are averaged.
         self_check_z: how many standard errors a background tile's gain must clear (noisy
             evidence, as on blurred frames, keeps the initial flow).
-        self_check_blend: px over which the two flows are blended where the choice changes.
+        self_check_blend: px over which the two flows are blended where the choice changes (0:
+            none; a blend gives the tuned flow to pixels beside the person that were judged
+            for the initial flow); None: the preset's (default: 0 in 3D mode, 1 in 2D).
+        self_check_own: a person pixel also needs its own error to be lower, not only its
+            window's (else the band of background beside a limb, whose window holds limb
+            pixels, goes with the limb); None: the preset's (default: in 3D mode).
         seed: seed_everything before each stage (the same run gives the same result).
     """
 
@@ -166,7 +178,8 @@ class BootstrapConfig:
     self_check_tile: int = 32
     self_check_window: int = 5
     self_check_z: float = 1.0
-    self_check_blend: int = 1
+    self_check_blend: int | None = None
+    self_check_own: bool | None = None
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -189,7 +202,7 @@ class BootstrapConfig:
             raise ValueError(f"self_check_z: expected >= 0 standard errors, got {self.self_check_z}")
         if not 0 <= self.self_check_margin < 1:
             raise ValueError(f"self_check_margin: expected 0 <= margin < 1, got {self.self_check_margin}")
-        if self.self_check_tile < 1 or self.self_check_window < 1 or self.self_check_blend < 0:
+        if self.self_check_tile < 1 or self.self_check_window < 1 or (self.self_check_blend or 0) < 0:
             raise ValueError(f"self_check_tile / self_check_window / self_check_blend: expected >= 1 / >= 1 / >= 0 "
                              f"px, got {self.self_check_tile} / {self.self_check_window} / {self.self_check_blend}")
         if self.drift_tolerance < 0:
@@ -209,6 +222,11 @@ class BootstrapConfig:
 
     def option(self, name: str) -> Any:
         return PRESETS[self.preset]["options"][name]
+
+    def check_setting(self, name: str) -> Any:
+        """``self_check_<name>`` (own, blend), or the preset's for this mode when None."""
+        value = getattr(self, f"self_check_{name}")
+        return value if value is not None else self.option(f"self_check_{self.mode}")[name]
 
     @property
     def checking(self) -> str:

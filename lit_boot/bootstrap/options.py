@@ -49,6 +49,7 @@ class FlowOptions(TypedDict, total=False):
     loss_beta: float
     target_updates: int | None
     sketch_weight: float
+    sketch_gap: float
     train_parts: str
     freeze_batchnorm: bool
     crop_margin: int | None

@@ -111,20 +111,24 @@ def choose_regions(
 
 
 def choose_pixels(error_initial: Tensor, error_tuned: Tensor, valid: Tensor, select: Tensor, window: int,
-                  margin: float) -> Tensor:
+                  margin: float, own: bool = False) -> Tensor:
     """Which ``select``-ed pixels of one pair take the tuned flow: (H, W) bool.
 
     error_*: (H, W) per-pixel photometric errors; valid, select: (H, W) bool. Each error is
     averaged over the valid pixels of a ``window`` x ``window`` box around the pixel; the tuned
     flow wins where its average is below ``(1 - margin)`` x the initial's (a box with no valid
-    pixel: no)."""
+    pixel: no) and, with ``own``, where the pixel's own error is lower too (a valid pixel: a
+    box is swayed by its neighbours, as in the band of background beside a limb, whose box
+    holds limb pixels that the tuned flow explains better)."""
     size = (window, window)
     weight = valid.float()[None, None]
     count = kornia.filters.box_blur(weight, size, border_type="replicate")
     mean_i = kornia.filters.box_blur(weight * error_initial[None, None], size, border_type="replicate")
     mean_t = kornia.filters.box_blur(weight * error_tuned[None, None], size, border_type="replicate")
-    won = (mean_t < (1.0 - margin) * mean_i) & (count > 0)  # the same divisor on both sides
-    return won[0, 0] & select
+    won = ((mean_t < (1.0 - margin) * mean_i) & (count > 0))[0, 0]  # the same divisor on both sides
+    if own:
+        won &= valid & (error_tuned < error_initial)
+    return won & select
 
 
 def blend_weights(choice: Tensor, blend: int) -> Tensor:
@@ -166,6 +170,7 @@ def self_check(
     blend: int = 1,
     window: int = 5,
     z: float = 1.0,
+    own: bool = False,
 ) -> tuple[Tensor, dict[str, Any], Tensor]:
     """The checked flows, the record of every decision and the weight map of the tuned flow.
 
@@ -200,7 +205,7 @@ def self_check(
         err_i, err_t, valid = err_i[0], err_t[0], (valid_i & valid_t)[0]
         on, there = person[t, y0:y1, x0:x1], labels[t, y0:y1, x0:x1]
         won, mean_i, mean_t, pixels = choose_regions(err_i, err_t, valid & ~on, there, count, margin, z)
-        on_person = choose_pixels(err_i, err_t, valid, on, window, margin)
+        on_person = choose_pixels(err_i, err_t, valid, on, window, margin, own)
         choice[y0:y1, x0:x1] = torch.where(on, on_person, won[there])
         choices.append(choice)
         judged = valid & on
@@ -220,7 +225,7 @@ def self_check(
         record["tuned_fraction"] = float(weight[t].mean())
     regions = sum(len(p["regions"]) for p in per_pair)
     tuned_regions = sum(len(p["tuned"]) for p in per_pair)
-    record = {"method": "photometric", "margin": margin, "tile": tile, "blend": blend, "window": window, "z": z,
+    record = {"method": "photometric", "margin": margin, "tile": tile, "blend": blend, "window": window, "z": z, "own": own,
               "kept_tuned_fraction": float(weight.mean()), "regions_tuned": tuned_regions,
               "regions_initial": regions - tuned_regions,
               "person_tuned_fraction": float(weight[person].mean()) if person.any() else 0.0,
@@ -240,8 +245,8 @@ def check_stage(
     from ..metrics import scene_flow_metrics
 
     flows, record, weight = self_check(scene.frames, initial, tuned, person, config.self_check_margin,
-                                       config.self_check_tile, config.self_check_blend,
-                                       config.self_check_window, config.self_check_z)  # fmt: skip
+                                       config.self_check_tile, config.check_setting("blend"),
+                                       config.self_check_window, config.self_check_z, config.check_setting("own"))  # fmt: skip
     return flows, {**record, "tuned_metrics": scene_flow_metrics(scene.gt, tuned)}, weight
 
 

@@ -27,7 +27,7 @@ from ..optim import adam
 from .crops import crop_loss
 from .gate import gate_sketch
 from .raft import load_raft, predict_flow
-from .sketch import SketchConfig, sketch_from_layout, target_flow
+from .sketch import SketchConfig, footprint_offsets, sketch_from_layout, target_flow
 from .warm import FeatureCache, box_region, crop_box, paste
 
 __all__ = ["FlowTTT"]
@@ -60,6 +60,10 @@ class FlowTTT(L.LightningModule):
             ``train_updates``, the authors).
         sketch_weight: weight of sketch pixels in the loss relative to the others (1: every
             pixel alike, the paper).
+        sketch_gap: unpainted pixels within this many footprint radii (the footprint's largest
+            offset, px) of the sketch get no loss: the footprint guesses a limb's half-width, so
+            these may be the person's, whose base flow is what the sketch corrects; 0: every
+            pixel is held to the base flow (the authors).
         train_parts: all (the paper) or update_block (update block and mask predictor only).
         freeze_batchnorm: keep BatchNorm statistics fixed (the paper does not).
         crop_margin: train on a crop around the sketch (its bounding box plus this margin, px)
@@ -97,6 +101,7 @@ class FlowTTT(L.LightningModule):
         loss_beta: float = 1.0,
         target_updates: int | None = None,
         sketch_weight: float = 1.0,
+        sketch_gap: float = 0.0,
         train_parts: str = "all",
         freeze_batchnorm: bool = False,
         crop_margin: int | None = None,
@@ -118,7 +123,11 @@ class FlowTTT(L.LightningModule):
             raise ValueError(f"plateau_patience: expected None or >= 1 epochs, got {plateau_patience}")
         if warm_start and train_parts != "update_block":
             raise ValueError(f"warm_start: needs train_parts='update_block' (frozen, cached encoders), got {train_parts!r}")
+        if not sketch_gap >= 0:
+            raise ValueError(f"sketch_gap: expected >= 0 footprint radii, got {sketch_gap}")
         self.sketch_config = sketch or SketchConfig()
+        reach = int(footprint_offsets(self.sketch_config.footprint, self.sketch_config.size).abs().max())
+        self.gap_px = round(sketch_gap * max(reach, 1))  # px: the unknown zone beside the sketch
         self.save_hyperparameters(ignore=["sketch"])
         self.hparams["sketch"] = asdict(self.sketch_config)
         self.raft = load_raft(arch, weights)
@@ -313,6 +322,15 @@ class FlowTTT(L.LightningModule):
         n = len(flows)
         return sum(self.hparams.gamma ** (n - 1 - i) * one(f) for i, f in enumerate(flows))
 
+    def loss_weights(self, mask: torch.Tensor) -> torch.Tensor:
+        """Per-pixel loss weights (B, H, W) from sketch masks (B, H, W) bool: ``sketch_weight`` on
+        the sketch, 0 on the unpainted pixels within ``sketch_gap`` footprint radii of it (the
+        unknown zone: limb or background), 1 elsewhere (held to the base flow)."""
+        weight = 1.0 + (self.hparams.sketch_weight - 1.0) * mask.float()
+        if self.gap_px:
+            weight = weight * (mask | ~self.person_region(mask, self.gap_px)).float()
+        return weight
+
     def _step_pair(self, image1, image2, target, weight) -> torch.Tensor:
         flows = predict_flow(self.raft, image1, image2, self.hparams.train_updates, all_updates=True,
                              grad_updates=self.hparams.grad_updates)  # fmt: skip
@@ -322,7 +340,7 @@ class FlowTTT(L.LightningModule):
         idx = batch["index"].cpu()
         target = self.targets[idx].to(self.device)
         mask = self.sketch_masks[idx].to(self.device)
-        weight = 1.0 + (self.hparams.sketch_weight - 1.0) * mask.float()
+        weight = self.loss_weights(mask)
         if self.hparams.warm_start:
             loss = self._warm_loss(idx, target, weight)
             if loss is None:  # no pair of the batch has a box: nothing to learn here
