@@ -262,10 +262,10 @@ def test_with_own_a_pixel_its_window_favours_still_needs_its_own_error_lower():
     assert record["own"] is True
 
 
-def test_the_person_rule_is_the_presets_for_the_mode_unless_given():
-    assert BootstrapConfig(mode="3d").check_setting("own") is True and BootstrapConfig(mode="3d").check_setting("blend") == 0
-    assert BootstrapConfig(mode="2d").check_setting("own") is False and BootstrapConfig(mode="2d").check_setting("blend") == 1
-    assert BootstrapConfig(mode="2d", self_check_own=True, self_check_blend=0).check_setting("own") is True
-    assert BootstrapConfig(mode="3d", self_check_blend=2).check_setting("blend") == 2
-    assert BootstrapConfig(mode="3d").flow_kwargs()["sketch_gap"] == 2.0
-    assert "sketch_gap" not in BootstrapConfig(mode="2d").flow_kwargs()
+def test_the_default_preset_frees_the_zone_beside_the_sketch_and_checks_each_pixel_on_its_own_error():
+    for mode in ("3d", "2d"):
+        config = BootstrapConfig(mode=mode)
+        assert config.self_check_own is True and config.self_check_blend == 0
+        assert config.flow_kwargs()["sketch_gap"] == 2.0
+    assert BootstrapConfig(mode="2d").flow_kwargs()["plateau_delta"] == 0.02
+    assert "sketch_gap" not in BootstrapConfig(preset="paper").flow_kwargs()  # the authors hold every pixel

@@ -39,7 +39,8 @@ DRIFT_GUARDS = ("record", "stop", "rollback")
 SELF_CHECKS = ("off", "photometric")
 
 #: The default preset's fast fine-tune (issue 15): see lit_boot.flow.warm.
-FAST_FLOW: dict[str, Any] = {"train_parts": "update_block", "warm_start": True, "train_updates": 2, "crop_margin": 24}
+FAST_FLOW: dict[str, Any] = {"train_parts": "update_block", "warm_start": True, "train_updates": 2, "crop_margin": 24,
+                              "sketch_gap": 2.0}
 
 #: Per preset and mode: FlowTTT arguments, refiner arguments, options of the orchestrator.
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
@@ -50,8 +51,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                     "train_updates": 20, "freeze_batchnorm": False, "lr": 1e-5},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
-        "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off",
-                    "self_check_3d": {"own": False, "blend": 1}, "self_check_2d": {"own": False, "blend": 1}},
+        "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off"},
     },
     "default": {
         # the fast fine-tune (lit_boot.flow.warm): frozen cached encoders, 2 updates from RAFT's own
@@ -61,15 +61,13 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         # loss stops falling and backpropagates through the last update only; the self-check
         # holds the background (BENCHMARKS.md, "Speed" and "Do no harm")
         "flow_3d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
-                    "sketch_weight": 5.0, "loss_beta": 0.1, "sketch_gap": 2.0},
+                    "sketch_weight": 5.0, "loss_beta": 0.1},
         "flow_2d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 2e-5,
-                    "sketch_weight": 5.0, "loss_beta": 0.1, "plateau_patience": 3, "grad_updates": 1},
+                    "sketch_weight": 5.0, "loss_beta": 0.1, "plateau_patience": 3, "plateau_delta": 0.02,
+                    "grad_updates": 1},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
-        "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric",
-                    # the self-check's person rule per mode: with the unknown zone beside the sketch
-                    # (3D), a pixel's own error decides too and nothing is blended
-                    "self_check_3d": {"own": True, "blend": 0}, "self_check_2d": {"own": False, "blend": 1}},
+        "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric"},
     },
 }  # fmt: skip
 
@@ -147,10 +145,10 @@ class BootstrapConfig:
             evidence, as on blurred frames, keeps the initial flow).
         self_check_blend: px over which the two flows are blended where the choice changes (0:
             none; a blend gives the tuned flow to pixels beside the person that were judged
-            for the initial flow); None: the preset's (default: 0 in 3D mode, 1 in 2D).
+            for the initial flow).
         self_check_own: a person pixel also needs its own error to be lower, not only its
             window's (else the band of background beside a limb, whose window holds limb
-            pixels, goes with the limb); None: the preset's (default: in 3D mode).
+            pixels, goes with the limb).
         seed: seed_everything before each stage (the same run gives the same result).
     """
 
@@ -178,8 +176,8 @@ class BootstrapConfig:
     self_check_tile: int = 32
     self_check_window: int = 5
     self_check_z: float = 1.0
-    self_check_blend: int | None = None
-    self_check_own: bool | None = None
+    self_check_blend: int = 0
+    self_check_own: bool = True
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -202,7 +200,7 @@ class BootstrapConfig:
             raise ValueError(f"self_check_z: expected >= 0 standard errors, got {self.self_check_z}")
         if not 0 <= self.self_check_margin < 1:
             raise ValueError(f"self_check_margin: expected 0 <= margin < 1, got {self.self_check_margin}")
-        if self.self_check_tile < 1 or self.self_check_window < 1 or (self.self_check_blend or 0) < 0:
+        if self.self_check_tile < 1 or self.self_check_window < 1 or self.self_check_blend < 0:
             raise ValueError(f"self_check_tile / self_check_window / self_check_blend: expected >= 1 / >= 1 / >= 0 "
                              f"px, got {self.self_check_tile} / {self.self_check_window} / {self.self_check_blend}")
         if self.drift_tolerance < 0:
@@ -222,11 +220,6 @@ class BootstrapConfig:
 
     def option(self, name: str) -> Any:
         return PRESETS[self.preset]["options"][name]
-
-    def check_setting(self, name: str) -> Any:
-        """``self_check_<name>`` (own, blend), or the preset's for this mode when None."""
-        value = getattr(self, f"self_check_{name}")
-        return value if value is not None else self.option(f"self_check_{self.mode}")[name]
 
     @property
     def checking(self) -> str:

@@ -7,7 +7,7 @@ both. Then, per pair:
 
 - On the person (the dilated sketch, as the runner's drift), pixel by pixel: the tuned flow is
   kept where its error, averaged over a ``window`` x ``window`` box, is below ``(1 - margin)``
-  times the initial flow's averaged alike. The tuned flow's gain and its harm both sit at the
+  times the initial flow's averaged alike, and (``own``) the pixel's own error is lower too. The tuned flow's gain and its harm both sit at the
   person: the limbs it follows better, and the thin band of background around the silhouette
   that RAFT's 1/8-resolution update drags along with them; a coarser region mixes the two.
 - Elsewhere, in square tiles of ``tile`` px (their background part): the tuned flow is kept in
@@ -16,9 +16,10 @@ both. Then, per pair:
   foggy frames census errors are high and noisy, and a 2% gain there is no evidence.
 
 Ties, empty tiles and tiles with fewer than :data:`MIN_PIXELS` valid pixels keep the initial
-flow. The binary choice map is blurred with a box of ``2 blend + 1`` px, so the two flows are
-blended over ``blend`` px on each side of a change of choice; elsewhere each pixel is exactly
-one of the two flows.
+flow. With ``blend`` > 0 the binary choice map is blurred with a box of ``2 blend + 1`` px, so
+the two flows are blended over ``blend`` px on each side of a change of choice; elsewhere (and
+everywhere with ``blend`` 0, the orchestrator's default) each pixel is exactly one of the two
+flows.
 
 - :func:`region_labels`: the tiles, each split into its person and background parts.
 - :func:`choose_regions`: the per-region decision from two error maps.
@@ -245,8 +246,8 @@ def check_stage(
     from ..metrics import scene_flow_metrics
 
     flows, record, weight = self_check(scene.frames, initial, tuned, person, config.self_check_margin,
-                                       config.self_check_tile, config.check_setting("blend"),
-                                       config.self_check_window, config.self_check_z, config.check_setting("own"))  # fmt: skip
+                                       config.self_check_tile, config.self_check_blend,
+                                       config.self_check_window, config.self_check_z, config.self_check_own)  # fmt: skip
     return flows, {**record, "tuned_metrics": scene_flow_metrics(scene.gt, tuned)}, weight
 
 
