@@ -18,7 +18,7 @@ tuned and checked flows, pooled over pixels per scene; then the mean relative ch
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/selfcheck_check.py [--scenes 0,1,2,3,4,5,6,7] [--frames 8]
       [--height 128] [--width 256] [--mode 3d|2d] [--epochs 8 (3d) / 50 (2d)] [--margins 0,0.02,0.05] [--windows 3,5,9]
-      [--tile 32] [--blend 1] [--gate] [--flow JSON] [--sintel alley_1,market_5] [--sintel-size 218,512]
+      [--tile 32] [--blend 0] [--own 1] [--gate] [--flow JSON] [--sintel alley_1,market_5] [--sintel-size 218,512]
       [--sintel-epochs 8] [--seed 0] [--out /tmp/selfcheck_check] [--fresh]
 Scenes are benchmarks/bootstrap_suite.py's (index = its seed). ``--gate`` makes the targets with
 the evidence gate (bone+pixel, search 3). The whole method with the self-check on is
@@ -128,7 +128,7 @@ def report(runs: dict, args) -> None:
         for margin in [float(s) for s in args.margins.split(",")]:
             for window in [int(s) for s in args.windows.split(",")]:
                 checked, record, weight = self_check(scene.frames, initial, tuned, person, margin, args.tile,
-                                                     args.blend, window)  # fmt: skip
+                                                     args.blend, window, own=bool(args.own))  # fmt: skip
                 metrics = (m_i, m_t, scene_flow_metrics(scene.gt, checked))
                 counts = agreement(scene, initial, tuned, person, record, weight, args.tie)
                 tot = totals.setdefault((group, margin, window), {"person": [0] * 4, "background": [0] * 4, "rel": []})
@@ -162,7 +162,8 @@ def main() -> None:
     p.add_argument("--margins", default="0,0.02,0.05")
     p.add_argument("--windows", default="3,5,9")
     p.add_argument("--tile", type=int, default=32)
-    p.add_argument("--blend", type=int, default=1)
+    p.add_argument("--blend", type=int, default=0)
+    p.add_argument("--own", type=int, default=1, choices=(0, 1), help="a person pixel's own error must be lower too")
     p.add_argument("--gate", action="store_true", help="targets with the evidence gate (bone+pixel, search 3)")
     p.add_argument("--flow", default="{}", help="FlowTTT options over the preset's, JSON")
     p.add_argument("--tie", type=float, default=0.005, help="px: GT EPE differences below this are ties")

@@ -52,7 +52,8 @@ def test_a_corrupted_tile_gets_the_initial_flow_and_an_exact_region_keeps_the_tu
     bad[32:, 64:] = True  # tile_1_2
     initial = torch.where(bad, gt, gt + 1.5)  # exact in tile_1_2, 1.5 px off elsewhere
     tuned = torch.where(bad, gt + 5.0, gt)  # 5 px off in tile_1_2, exact elsewhere
-    flows, record, _ = self_check(scene.frames, initial, tuned, person, margin=0.02, tile=TILE, blend=2, window=5)
+    flows, record, _ = self_check(scene.frames, initial, tuned, person, margin=0.02, tile=TILE, blend=2, window=5,
+                                  own=False)  # the box alone decides here (own: see below)
     for pair in record["per_pair"]:
         kept_initial = set(pair["regions"]) - set(pair["tuned"])
         assert kept_initial == {"tile_1_2"}  # the corrupted tile only
@@ -234,7 +235,7 @@ def test_only_the_tiles_where_the_flows_differ_are_measured_and_the_decisions_ar
         err_t, valid_t = photometric_error(*pair, tuned[t : t + 1])
         err_i, err_t, valid = err_i[0], err_t[0], (valid_i & valid_t)[0]
         won = choose_regions(err_i, err_t, valid & ~person[t], labels[t], count, 0.02, 1.0)[0]
-        on_person = choose_pixels(err_i, err_t, valid, person[t], 5, 0.02)
+        on_person = choose_pixels(err_i, err_t, valid, person[t], 5, 0.02, own=True)
         choices.append(torch.where(person[t], on_person, won[labels[t]]))
     assert torch.equal(weight, blend_weights(torch.stack(choices), 1))
     assert weight[0].sum() > 0 and not weight[1].any()

@@ -7,9 +7,11 @@ both. Then, per pair:
 
 - On the person (the dilated sketch, as the runner's drift), pixel by pixel: the tuned flow is
   kept where its error, averaged over a ``window`` x ``window`` box, is below ``(1 - margin)``
-  times the initial flow's averaged alike, and (``own``) the pixel's own error is lower too. The tuned flow's gain and its harm both sit at the
-  person: the limbs it follows better, and the thin band of background around the silhouette
-  that RAFT's 1/8-resolution update drags along with them; a coarser region mixes the two.
+  times the initial flow's averaged alike, and (``own``) the pixel's own error is lower too.
+  The tuned flow's gain and its harm both sit at the person: the limbs it follows better, and
+  the thin band of background around the silhouette that RAFT's 1/8-resolution update drags
+  along with them; a coarser region mixes the two, and a box straddling the silhouette lets the
+  limb carry the band (hence ``own``).
 - Elsewhere, in square tiles of ``tile`` px (their background part): the tuned flow is kept in
   a tile whose mean error is below ``(1 - margin)`` times the initial flow's and whose gain is
   clear of the noise: at least ``z`` standard errors (:func:`choose_regions`). On blurred or
@@ -168,10 +170,10 @@ def self_check(
     person: Tensor,
     margin: float = 0.02,
     tile: int = 32,
-    blend: int = 1,
+    blend: int = 0,
     window: int = 5,
     z: float = 1.0,
-    own: bool = False,
+    own: bool = True,
 ) -> tuple[Tensor, dict[str, Any], Tensor]:
     """The checked flows, the record of every decision and the weight map of the tuned flow.
 
