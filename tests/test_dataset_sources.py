@@ -159,6 +159,11 @@ def test_video_tasks_with_a_pose_file_beside(videos: Path) -> None:
         part, expected = chunk.load(), slice_scene(scene, *chunk.frames)
         assert torch.equal(part.frames, expected.frames) and torch.equal(part.keypoints2d, expected.keypoints2d)
         assert part.metadata == expected.metadata
+    strided = Task("clip", "video", {"path": str(videos / "clip.mp4"), "stride": 2}, poses=str(videos / "clip.npz"))
+    whole = strided.load()
+    part = Task(**{**strided.to_dict(), "frames": (1, 3), "parent": "clip", "name": "clip--00001-00003"}).load()
+    assert part.metadata["frame_indices"] == whole.metadata["frame_indices"][1:3]  # source frames, read cut
+    assert torch.equal(part.frames, whole.frames[1:3]) and part.metadata == slice_scene(whole, 1, 3).metadata
     save_poses(_poses(6), videos / "clip.json")
     with pytest.raises(ValueError, match="two pose files beside it"):
         video_tasks(videos)

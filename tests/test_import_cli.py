@@ -76,7 +76,7 @@ def test_import_help_gives_each_reader_its_whole_first_paragraph_as_plain_text(c
     listing = help_of(["import", "--help"], capsys)
     sintel = "Read frames first..last (inclusive, Sintel's numbering from 1; default: all) of one scene as a Scene"
     assert f"{sintel} at 24 fps." in listing
-    assert "natural name order) as a Scene: frames 0, stride, 2 stride, ... (at most max_frames)." in listing
+    assert "natural name order) as a Scene: source frames first, first + stride, first + 2 stride, ..." in listing
     for kind in ("sintel", "3dpw", "h36m", "video"):
         text = help_of(["import", kind, "--help"], capsys)
         assert "``" not in text and ":class:" not in text and ":func:" not in text and "<class" not in text

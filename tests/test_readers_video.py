@@ -80,6 +80,42 @@ def test_video_file_with_poses(mp4, tmp_path):
         read_video(mp4, max_frames=4, poses=sparse)
 
 
+@pytest.mark.parametrize("source", ["folder", "mp4"])
+def test_first_skips_frames_without_decoding_them(source, folder, mp4, tmp_path, monkeypatch):
+    path = {"folder": folder, "mp4": mp4}[source]
+    whole = read_video(path)
+    part = read_video(path, first=2, max_frames=2)
+    assert torch.equal(part.frames, whole.frames[2:4]) and part.metadata["frame_indices"] == [2, 3]
+    strided = read_video(path, stride=2, first=1)  # source frames 1, 3, ...
+    odd = list(range(1, whole.num_frames, 2))
+    assert strided.metadata["frame_indices"] == odd and torch.equal(strided.frames, whole.frames[odd])
+    with pytest.raises(ValueError, match="first=9 but the"):
+        read_video(path, first=9)
+    with pytest.raises(ValueError, match="first must be"):
+        read_video(path, first=-1)
+    if source == "mp4":  # with poses: the rows of the kept frames; the frames before are not decoded
+        save_poses(_poses(6), tmp_path / "poses.npz")
+        posed = read_video(path, first=3, poses=tmp_path / "poses.npz")
+        assert torch.equal(posed.keypoints2d[:, 0, 0], torch.tensor([3.0, 4.0, 5.0]))
+        retrieved = []
+        real = cv2.VideoCapture
+
+        class Counting:
+            def __init__(self, *args):
+                self.capture = real(*args)
+
+            def retrieve(self, *args):
+                retrieved.append(1)
+                return self.capture.retrieve(*args)
+
+            def __getattr__(self, name):
+                return getattr(self.capture, name)
+
+        monkeypatch.setattr(cv2, "VideoCapture", Counting)
+        read_video(path, first=4)
+        assert len(retrieved) == 2  # frames 4 and 5 only
+
+
 def test_errors(tmp_path, folder, mp4):
     with pytest.raises(FileNotFoundError, match="missing.mp4"):
         read_video(tmp_path / "missing.mp4")

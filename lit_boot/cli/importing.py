@@ -64,6 +64,7 @@ ARG_HELP: dict[str, str] = {
 ARG_HELP_BY_KIND = {
     "sintel": {"first": f"first frame number, from 1 {_RANGE}", "last": f"last frame number {_RANGE}"},
     "3dpw": {"joints_layout": "layout of the GT joints: lsp14 (the paper's 14) or smpl (24)"},
+    "video": {"first": "first source frame, 0-based (the frames before are not decoded; default: 0)"},
     "h36m": {"joints_layout": "layout of the GT joints: lsp14 (the paper's 14) or h36m17"},
 }
 

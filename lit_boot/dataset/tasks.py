@@ -9,7 +9,7 @@ processes and Ray as plain dicts (:meth:`Task.to_dict`, :meth:`Task.from_dict`).
 from __future__ import annotations
 
 import re
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -87,8 +87,8 @@ class Task:
         estimates of its own, e.g. a video or a Sintel scene, gets MediaPipe Pose, run on the
         task's frames only, unless ``estimate`` is False, e.g. to count the frames), then
         ``frames`` [start, stop) cut out
-        (:func:`~lit_boot.dataset.chunks.slice_scene`). A video chunk decodes source frames only
-        up to ``stop``; the other kinds read the whole scene, then cut.
+        (:func:`~lit_boot.dataset.chunks.slice_scene`). A video chunk decodes its own frames only
+        (``read_video``'s ``first``); the other kinds read the whole scene, then cut.
 
         Raises ValueError naming the task for bad args or frames beyond the scene, and the
         readers' errors naming the file: FileNotFoundError (missing path), DatasetFormatError /
@@ -99,10 +99,13 @@ class Task:
         scene = self._read()
         if self.frames is not None:
             start, stop = self.frames
-            if stop > scene.num_frames:
-                raise ValueError(f"task {self.name!r}: frames [{start}, {stop}) but the source has "
-                                 f"{scene.num_frames} frames")  # fmt: skip
-            scene = slice_scene(scene, start, stop)
+            have = scene.num_frames + (start if self.kind == "video" else 0)  # a video chunk is read cut
+            if stop > have:
+                raise ValueError(f"task {self.name!r}: frames [{start}, {stop}) but the source has {have} frames")
+            if self.kind == "video":
+                scene = replace(scene, metadata={**scene.metadata, "chunk": {"start": start, "stop": stop}})
+            else:
+                scene = slice_scene(scene, start, stop)
         if estimate and self.poses is None and scene.keypoints2d is None and scene.joints3d is None:
             from ..estimate import estimate_poses
 
@@ -110,7 +113,7 @@ class Task:
         return scene
 
     def _read(self) -> Scene:
-        """The source's scene with ``poses`` attached (not cut; a video only up to ``stop``)."""
+        """The source's scene with ``poses`` attached (not cut; a video chunk: its own frames only)."""
         import importlib
         import inspect
 
@@ -131,9 +134,11 @@ class Task:
             raise ValueError(f"task {self.name!r}: args {sorted(args)} do not fit {name}: {err}") from None
         if self.kind != "video":
             return self._attach(reader(**args))
-        if self.frames is not None:  # decode no further than the chunk's end
-            cap = args.get("max_frames")
-            args["max_frames"] = self.frames[1] if cap is None else min(cap, self.frames[1])
+        if self.frames is not None:  # decode the chunk's frames only
+            start, stop = self.frames
+            cap, first, stride = args.get("max_frames"), args.get("first", 0), args.get("stride", 1)
+            args["first"] = first + start * stride  # a source frame
+            args["max_frames"] = stop - start if cap is None else max(1, min(cap, stop) - start)
         return reader(**args, poses=self.poses)  # read_video selects and checks the pose rows itself
 
     def _attach(self, scene: Scene) -> Scene:

@@ -46,36 +46,41 @@ def output_size(native: Size, resize: Resize | None) -> Size | None:
     return size
 
 
-def _check_memory(path: Path, total: int, native: Size, stride: int, max_frames: int | None, resize) -> None:
+def _check_memory(path: Path, total: int, native: Size, stride: int, first: int, max_frames: int | None,
+                  resize) -> None:
     """Refuse, before decoding, a selection of frames that would not fit in memory."""
-    T = len(range(0, total, stride)[:max_frames])
+    T = len(range(first, total, stride)[:max_frames])
     H, W = output_size(native, resize) or native
     check_memory(path, T, H, W, advice="read fewer or smaller frames:")
 
 
-def _read_folder(folder: Path, stride: int, max_frames: int | None, resize: Resize | None):
+def _read_folder(folder: Path, stride: int, first: int, max_frames: int | None, resize: Resize | None):
     files = list_files(folder, IMAGE_SUFFIXES)
     if not files:
         raise DatasetFormatError(f"{folder}: no image frames ({', '.join(IMAGE_SUFFIXES)}) in this folder")
-    indices = list(range(0, len(files), stride))[:max_frames]
+    indices = list(range(first, len(files), stride))[:max_frames]
+    if not indices:
+        raise ValueError(f"{folder}: first={first} but the folder has {len(files)} frames")
     native = tuple(read_image(files[0]).shape[1:])
-    _check_memory(folder, len(files), native, stride, max_frames, resize)
+    _check_memory(folder, len(files), native, stride, first, max_frames, resize)
     frames, _ = read_images([files[t] for t in indices], output_size(native, resize))
     extra = {"files": [files[t].name for t in indices]}
     return frames, indices, native, len(files), None, extra
 
 
-def _read_file(path: Path, stride: int, max_frames: int | None, resize: Resize | None, count_all: bool):
+def _read_file(path: Path, stride: int, first: int, max_frames: int | None, resize: Resize | None, count_all: bool):
     def keep(index: int, kept: int) -> bool | None:
         if max_frames is not None and kept >= max_frames:
             return False if count_all else None  # go on only to count the frames
-        return index % stride == 0
+        return index >= first and (index - first) % stride == 0  # earlier frames: grabbed, not decoded
 
     probed = probe_video(path)
     if probed is not None:
-        _check_memory(path, *probed, stride, max_frames, resize)
+        _check_memory(path, *probed, stride, first, max_frames, resize)
     video = decode_video(path, keep, lambda native: output_size(native, resize))
     if not video.indices:
+        if first and video.seen:
+            raise ValueError(f"{path}: first={first} but the video has {video.seen} frames")
         raise DatasetFormatError(f"{path}: no frame could be read (empty or undecodable video)")
     total = video.seen if count_all else None
     return video.frames, video.indices, video.native, total, video.fps, {}
@@ -111,9 +116,12 @@ def read_video(
     resize: Resize | None = None,
     poses: str | os.PathLike | PoseEstimates | None = None,
     fps: float | None = None,
+    first: int = 0,
 ) -> Scene:
     """Read a video file (mp4, anything OpenCV reads) or a folder of frames (jpg/png/...,
-    natural name order) as a Scene: frames 0, stride, 2 stride, ... (at most ``max_frames``).
+    natural name order) as a Scene: source frames first, first + stride, first + 2 stride, ...
+    (at most ``max_frames``; ``first`` 0-based). The frames before ``first`` are skipped, not
+    decoded: a chunk of a long video costs memory and decoding for its own frames only.
 
     ``resize``: None, a height (int; the width keeps the aspect ratio), a scale (float) or
     (H, W). ``poses``: a pose file of any kind :func:`~.estimates.read_estimates` reads, or
@@ -132,12 +140,15 @@ def read_video(
         raise ValueError(f"stride must be >= 1, got {stride}")
     if max_frames is not None and max_frames < 1:
         raise ValueError(f"max_frames must be >= 1 or None, got {max_frames}")
+    if isinstance(first, bool) or not isinstance(first, int) or first < 0:
+        raise ValueError(f"first must be an int >= 0, got {first!r}")
     path = Path(path)
     if path.is_dir():
-        frames, indices, native, total, file_fps, extra = _read_folder(path, stride, max_frames, resize)
+        frames, indices, native, total, file_fps, extra = _read_folder(path, stride, first, max_frames, resize)
     elif path.is_file():
         count_all = poses is not None  # to check the pose file's frame count
-        frames, indices, native, total, file_fps, extra = _read_file(path, stride, max_frames, resize, count_all)
+        frames, indices, native, total, file_fps, extra = _read_file(path, stride, first, max_frames, resize,
+                                                                     count_all)  # fmt: skip
     else:
         raise FileNotFoundError(f"{path}: no such video file or folder of frames")
     source_fps = float(fps or file_fps or DEFAULT_FOLDER_FPS)
