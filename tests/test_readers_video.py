@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from lit_boot.data.readers import DatasetFormatError, PoseEstimates, read_video, save_poses
-from lit_boot.data.readers.video import output_size
+from lit_boot.data.readers.video import output_size, video_frame_count
 
 
 def _frames(T: int, H: int = 24, W: int = 32) -> np.ndarray:
@@ -35,6 +35,27 @@ def mp4(tmp_path):
         writer.write(image)
     writer.release()
     return path
+
+
+@pytest.fixture
+def decoded(monkeypatch):
+    """A list that gets one item per video frame OpenCV decodes (retrieves) from now on."""
+    retrieved = []
+    real = cv2.VideoCapture
+
+    class Counting:
+        def __init__(self, *args):
+            self.capture = real(*args)
+
+        def retrieve(self, *args):
+            retrieved.append(1)
+            return self.capture.retrieve(*args)
+
+        def __getattr__(self, name):
+            return getattr(self.capture, name)
+
+    monkeypatch.setattr(cv2, "VideoCapture", Counting)
+    return retrieved
 
 
 def _poses(T: int, conf: float = 0.8, **kw) -> PoseEstimates:
@@ -81,7 +102,7 @@ def test_video_file_with_poses(mp4, tmp_path):
 
 
 @pytest.mark.parametrize("source", ["folder", "mp4"])
-def test_first_skips_frames_without_decoding_them(source, folder, mp4, tmp_path, monkeypatch):
+def test_first_skips_frames_without_decoding_them(source, folder, mp4, tmp_path, decoded):
     path = {"folder": folder, "mp4": mp4}[source]
     whole = read_video(path)
     part = read_video(path, first=2, max_frames=2)
@@ -97,23 +118,22 @@ def test_first_skips_frames_without_decoding_them(source, folder, mp4, tmp_path,
         save_poses(_poses(6), tmp_path / "poses.npz")
         posed = read_video(path, first=3, poses=tmp_path / "poses.npz")
         assert torch.equal(posed.keypoints2d[:, 0, 0], torch.tensor([3.0, 4.0, 5.0]))
-        retrieved = []
-        real = cv2.VideoCapture
-
-        class Counting:
-            def __init__(self, *args):
-                self.capture = real(*args)
-
-            def retrieve(self, *args):
-                retrieved.append(1)
-                return self.capture.retrieve(*args)
-
-            def __getattr__(self, name):
-                return getattr(self.capture, name)
-
-        monkeypatch.setattr(cv2, "VideoCapture", Counting)
+        decoded.clear()
         read_video(path, first=4)
-        assert len(retrieved) == 2  # frames 4 and 5 only
+        assert len(decoded) == 2  # frames 4 and 5 only
+
+
+def test_frame_count_without_decoding(folder, mp4, tmp_path, decoded):
+    for path in (folder, mp4):
+        for options in ({}, {"stride": 2}, {"first": 1, "stride": 2}, {"max_frames": 2, "first": 3}, {"resize": 12}):
+            assert video_frame_count(path, **options) == read_video(path, **options).num_frames, (path, options)
+    decoded.clear()
+    assert video_frame_count(mp4) == 6 and not decoded  # grabbed, never decoded
+    (tmp_path / "junk.mp4").write_bytes(b"\x00" * 100)
+    with pytest.raises(DatasetFormatError, match="junk.mp4"):
+        video_frame_count(tmp_path / "junk.mp4")
+    with pytest.raises(FileNotFoundError, match="missing.mp4"):
+        video_frame_count(tmp_path / "missing.mp4")
 
 
 def test_errors(tmp_path, folder, mp4):

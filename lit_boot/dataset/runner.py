@@ -101,7 +101,7 @@ def _plan(manifest: Manifest, tasks: list[Task], chunk_frames: int | None, chunk
         chunks = [task]
         if chunk_frames is not None:
             try:
-                chunks = plan_chunks(task, task.load(estimate=False).num_frames, chunk_frames, chunk_overlap)
+                chunks = plan_chunks(task, task.num_frames(), chunk_frames, chunk_overlap)
             except Exception as err:  # an unreadable source fails its own task
                 manifest.add([task])
                 manifest.mark(task.name, "failed", error=f"{type(err).__name__}: {err}", plan_failed=True)

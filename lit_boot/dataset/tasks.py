@@ -112,6 +112,16 @@ class Task:
             scene = estimate_poses(scene).apply_to(scene)  # rows matched by metadata["frame_indices"]
         return scene
 
+    def num_frames(self) -> int:
+        """The frames of the task's whole source scene (what :meth:`load` gives without
+        ``frames``): a video's are counted without decoding them (see
+        :func:`~lit_boot.data.readers.video.video_frame_count`); the other kinds are read."""
+        if self.kind != "video":
+            return self.load(estimate=False).num_frames
+        from ..data.readers.video import video_frame_count
+
+        return video_frame_count(**self.args)
+
     def _read(self) -> Scene:
         """The source's scene with ``poses`` attached (not cut; a video chunk: its own frames only)."""
         import importlib

@@ -18,7 +18,7 @@ from ._common import read_images
 from .estimates import list_files, read_estimates
 from .pose_file import PoseEstimates
 
-__all__ = ["IMAGE_SUFFIXES", "DEFAULT_FOLDER_FPS", "output_size", "read_video"]
+__all__ = ["IMAGE_SUFFIXES", "DEFAULT_FOLDER_FPS", "output_size", "read_video", "video_frame_count"]
 
 #: Frame rate assumed for a folder of frames when ``fps`` is not given.
 DEFAULT_FOLDER_FPS = 30.0
@@ -106,6 +106,24 @@ def _attach(scene: Scene, poses: PoseEstimates, where: str, total: int) -> Scene
     if scene.keypoints_conf is not None and poses.keypoints2d is not None and not (scene.keypoints_conf > 0).any():
         raise DatasetFormatError(f"{where}: nobody is ever found in the pose estimates of the selected frames")
     return scene
+
+
+def video_frame_count(path: str | os.PathLike, *, stride: int = 1, max_frames: int | None = None, first: int = 0,
+                      **_: object) -> int:
+    """How many frames :func:`read_video` with these arguments gives, without decoding any: a
+    folder's image files are counted; a video file's frames are grabbed (demuxed), not decoded,
+    since container headers may not know or may misstate the count. Other read_video
+    arguments are accepted and ignored. FileNotFoundError / DatasetFormatError as read_video."""
+    path = Path(path)
+    if path.is_dir():
+        total = len(list_files(path, IMAGE_SUFFIXES))
+    elif path.is_file():
+        total = decode_video(path, lambda index, kept: False).seen
+    else:
+        raise FileNotFoundError(f"{path}: no such video file or folder of frames")
+    if total == 0:
+        raise DatasetFormatError(f"{path}: no frame could be read (empty folder or undecodable video)")
+    return len(range(first, total, stride)[:max_frames])
 
 
 def read_video(
