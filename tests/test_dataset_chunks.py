@@ -159,7 +159,8 @@ def test_stitch_estimates_keeps_layouts_and_cross_fades() -> None:
     assert (est.keypoints_layout, est.joints3d_layout, est.cameras.model) == ("coco17", "lsp14", "weak_perspective")
     w = torch.tensor([0.0] * 8 + [0.2, 0.4, 0.6, 0.8] + [1.0] * 8)  # overlap [8, 12): (k + 1) / 5
     t = torch.arange(20.0)
-    assert torch.allclose(est.keypoints2d[:, 0, 0], t + w)
+    share = w * 0.6 / ((1 - w) * 0.5 + w * 0.6)  # the keypoints' cross-fade is confidence-weighted too
+    assert torch.allclose(est.keypoints2d[:, 0, 0], t + share)
     assert torch.allclose(est.keypoints_conf[:, 0], 0.5 + w / 10)
     assert torch.allclose(est.joints3d[:, 3, 2], 10 * t + w)
     assert torch.allclose(est.cameras.params[:, 1], t + w) and torch.allclose(est.cameras.crops[:, 1], t)
@@ -175,6 +176,20 @@ def test_stitch_estimates_keeps_layouts_and_cross_fades() -> None:
         odd = PoseEstimates(keypoints2d=torch.zeros(12, 14, 2), keypoints_conf=torch.ones(12, 14),
                             keypoints_layout="lsp14")  # fmt: skip
         stitch_estimates([(0, odd), (8, _estimates(8, 20, 0.0))], 20)
+
+
+def test_a_keypoint_a_chunk_did_not_find_lends_no_position_to_the_overlap() -> None:
+    first, second = _estimates(0, 12, 0.0), _estimates(8, 20, 1.0)
+    first.keypoints2d[9:11, 3] = 0.0  # not found: MediaPipe's zeros, confidence 0
+    first.keypoints_conf[9:11, 3] = 0.0
+    est = stitch_estimates([(0, first), (8, second)], 20)
+    assert torch.equal(est.keypoints2d[9:11, 3], second.keypoints2d[1:3, 3])  # the other chunk's, unblended
+    assert (est.keypoints_conf[9:11, 3] < 0.6).all()  # the confidence still fades
+    lost = [(0, torch.zeros(4, 2)), (2, torch.ones(4, 2))]
+    nobody = [torch.zeros(4), torch.zeros(4)]
+    assert torch.equal(stitch_sequences(lost, 6, nobody), stitch_sequences(lost, 6))  # nobody sure: the plain fade
+    with pytest.raises(ValueError, match="do not lead value"):
+        stitch_sequences(lost, 6, [torch.zeros(4, 3), torch.zeros(4, 3)])
 
 
 @pytest.fixture(scope="module")

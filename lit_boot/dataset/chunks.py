@@ -193,18 +193,24 @@ def _spans(chunks: list[tuple[int, torch.Tensor]], total: int, extra: int, what:
     return spans
 
 
-def stitch_sequences(chunks: list[tuple[int, torch.Tensor]], num_frames: int) -> torch.Tensor:
+def stitch_sequences(chunks: list[tuple[int, torch.Tensor]], num_frames: int,
+                     confidences: list[torch.Tensor] | None = None) -> torch.Tensor:
     """Per-frame tensors of chunks, (start, (T_c, ...)) in order of start, as one (num_frames,
     ...) sequence. Outside the overlaps a frame is its chunk's; inside the n frames shared by
     consecutive chunks the later one's weight ramps linearly (k + 1) / (n + 1), k = 0 .. n-1
     (0 and 1 fall just outside the overlap), the earlier one's is 1 minus that, so the sequence
     and its first differences stay continuous. (Weights are normalised where chunks overlap
-    more than pairwise.) Result dtype: the chunks' (floating point)."""
+    more than pairwise.) ``confidences``: per chunk, (T_c, ...) leading dims of its value (e.g.
+    keypoint confidences (T_c, K) for keypoints (T_c, K, 2)), multiplied into the weights, so a
+    chunk that did not find a keypoint lends it no position; where every chunk's confidence is
+    0 the plain cross-fade is kept. Result dtype: the chunks' (floating point)."""
     spans = _spans(chunks, num_frames, 0, "stitch_sequences")
+    if confidences is not None and len(confidences) != len(chunks):
+        raise ValueError(f"stitch_sequences: {len(confidences)} confidences for {len(chunks)} chunks")
     dtype = chunks[0][1].dtype if chunks[0][1].is_floating_point() else torch.get_default_dtype()
     shape = chunks[0][1].shape[1:]
-    total = torch.zeros(num_frames, *shape, dtype=torch.float64)
-    weight = torch.zeros(num_frames, dtype=torch.float64)
+    plain, sure, sure_weight = [torch.zeros(num_frames, *shape, dtype=torch.float64) for _ in range(3)]
+    plain_weight = torch.zeros(num_frames, *[1] * len(shape), dtype=torch.float64)
     for i, ((start, stop), (_, value)) in enumerate(zip(spans, chunks)):
         t = torch.arange(start, stop, dtype=torch.float64)
         w = torch.ones(stop - start, dtype=torch.float64)
@@ -212,9 +218,22 @@ def stitch_sequences(chunks: list[tuple[int, torch.Tensor]], num_frames: int) ->
             w = torch.minimum(w, (t - start + 1) / (n + 1))
         if i + 1 < len(spans) and (n := stop - spans[i + 1][0]) > 0:
             w = torch.minimum(w, (stop - t) / (n + 1))
-        total[start:stop] += w.view(-1, *[1] * len(shape)) * value.detach().to(torch.float64)
-        weight[start:stop] += w
-    return (total / weight.view(-1, *[1] * len(shape))).to(dtype)
+        w = w.view(-1, *[1] * len(shape))
+        value = value.detach().to(torch.float64)
+        plain[start:stop] += w * value
+        plain_weight[start:stop] += w
+        if confidences is not None:
+            c = confidences[i].detach().to(torch.float64).clamp_min(0)
+            if tuple(c.shape) != tuple(value.shape[: c.ndim]):
+                raise ValueError(f"stitch_sequences: confidences {i} {tuple(c.shape)} do not lead value "
+                                 f"{tuple(value.shape)}")  # fmt: skip
+            wc = (w * c.reshape(*c.shape, *[1] * (value.ndim - c.ndim))).expand_as(value)
+            sure[start:stop] += wc * value
+            sure_weight[start:stop] += wc
+    out = plain / plain_weight
+    if confidences is not None:
+        out = torch.where(sure_weight > 0, sure / sure_weight.clamp_min(1e-300), out)
+    return out.to(dtype)
 
 
 def stitch_pairs(chunks: list[tuple[int, torch.Tensor]], num_pairs: int) -> torch.Tensor:
@@ -260,8 +279,9 @@ def _stitch_frame_indices(parts: list[tuple[int, PoseEstimates]], num_frames: in
 
 def stitch_estimates(parts: list[tuple[int, PoseEstimates]], num_frames: int) -> PoseEstimates:
     """Per-chunk pose estimates, (start frame, PoseEstimates of T_c rows) in order of start, as
-    one PoseEstimates of ``num_frames`` rows: keypoints2d, keypoints_conf, joints3d and the
-    cameras' params and crops by :func:`stitch_sequences` (the cross-fade); layouts, camera
+    one PoseEstimates of ``num_frames`` rows: keypoints2d (weighted by their confidences too),
+    keypoints_conf, joints3d and the cameras' params and crops by :func:`stitch_sequences` (the
+    cross-fade); layouts, camera
     model, image_size must agree across parts. ``metadata``: {"chunks": [[start, stop], ...],
     "parts": [each part's metadata]}."""
     from ..data.readers.pose_file import PoseEstimates
@@ -270,13 +290,13 @@ def stitch_estimates(parts: list[tuple[int, PoseEstimates]], num_frames: int) ->
         raise ValueError("stitch_estimates: no parts given")
     first = parts[0][1]
 
-    def stitch(get) -> torch.Tensor | None:
+    def stitch(get, confidences: list[torch.Tensor] | None = None) -> torch.Tensor | None:
         values = [get(est) for _, est in parts]
         if all(v is None for v in values):
             return None
         if any(v is None for v in values):
             raise ValueError("stitch_estimates: a field is present in some parts only")
-        return stitch_sequences([(start, v) for (start, _), v in zip(parts, values)], num_frames)
+        return stitch_sequences([(start, v) for (start, _), v in zip(parts, values)], num_frames, confidences)
 
     for key in ("keypoints_layout", "joints3d_layout", "image_size"):
         _same(parts, lambda e: getattr(e, key), key)
@@ -286,8 +306,10 @@ def stitch_estimates(parts: list[tuple[int, PoseEstimates]], num_frames: int) ->
                       "cameras (model, crop_size)")  # fmt: skip
         cameras = Cameras(model[0], stitch(lambda e: e.cameras.params), stitch(lambda e: e.cameras.crops), model[1])
     sources = list(dict.fromkeys(est.source for _, est in parts))
+    has_conf = all(e.keypoints_conf is not None for _, e in parts)  # a keypoint not found lends no position
+    conf = [e.keypoints_conf for _, e in parts] if has_conf and first.keypoints2d is not None else None
     return PoseEstimates(
-        keypoints2d=stitch(lambda e: e.keypoints2d), keypoints_conf=stitch(lambda e: e.keypoints_conf),
+        keypoints2d=stitch(lambda e: e.keypoints2d, conf), keypoints_conf=stitch(lambda e: e.keypoints_conf),
         keypoints_layout=first.keypoints_layout, joints3d=stitch(lambda e: e.joints3d),
         joints3d_layout=first.joints3d_layout, cameras=cameras,
         frame_indices=_stitch_frame_indices(parts, num_frames), image_size=first.image_size,
