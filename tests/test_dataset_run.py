@@ -22,7 +22,7 @@ import lit_boot
 from lit_boot.data import read_flows
 from lit_boot.dataset import Task, run_dataset
 from lit_boot.dataset.engines import LocalEngine, RayEngine
-from lit_boot.dataset.manifest import SettingsChangedError
+from lit_boot.dataset.manifest import Manifest, SettingsChangedError
 from lit_boot.metrics import FlowMetrics
 
 CONFIG = dict(flow_epochs=1, pose_steps=15, video=False, accelerator="cpu",
@@ -184,15 +184,25 @@ def test_chunks_are_stitched_and_counted_once(tmp_path):
 
 
 def test_ray_with_a_local_instance_gives_the_same_results_and_retries_a_killed_worker(
-    reference, scene_dirs, tmp_path
+    reference, scene_dirs, tmp_path, monkeypatch
 ):
     ray = pytest.importorskip("ray", reason="needs the ray extra")
+    running, most = set(), []
+    mark = Manifest.mark
+
+    def watched(self, name, state, **kw):  # how many tasks the manifest says are running at once
+        (running.add if state == "running" else running.discard)(name)
+        most.append(len(running))
+        return mark(self, name, state, **kw)
+
+    monkeypatch.setattr(Manifest, "mark", watched)
     try:
         result, tasks = _run_killing_s2_once(tmp_path / "data", tasks=tasks_of(scene_dirs), config=CONFIG,
                                              engine=RayEngine(workers=2, retries=2))  # Ray retries the lost task
     finally:
         ray.shutdown()
     assert tasks["s2"]["attempts"] == 0  # Ray's retry, not the driver's
+    assert len(scene_dirs) > 2 and max(most) == 2  # 2 slots: a queued task is not "running"
     for which in ("initial", "final"):
         for name, value in reference.metrics[which].items():
             assert result.metrics[which][name] == pytest.approx(value, rel=1e-4, abs=1e-6), (which, name)

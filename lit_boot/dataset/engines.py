@@ -13,7 +13,9 @@ the driver retries lost tasks.
 - ``RayEngine``: one Ray task per scene (a GPU each when the cluster has GPUs), on an existing
   cluster (``address``) or a local Ray instance; Ray retries tasks whose worker was lost
   (``max_retries``). Needs the ``ray`` extra (``pip install "lit-boot[ray]"``); the dataset
-  folder must be on storage every node sees.
+  folder must be on storage every node sees. A task is started (``on_start``) when its worker
+  has written its start marker (:func:`~lit_boot.dataset.worker.started_file`), not when Ray
+  queues it.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from .worker import read_record, run_task, task_files
+from .worker import read_record, run_task, started_file, task_files
 
 __all__ = ["Job", "LocalEngine", "RayEngine", "visible_gpus", "make_engine", "ENGINES"]
 
@@ -151,16 +153,17 @@ def _ray_task(job: Job, threads: int) -> dict[str, Any]:
 class RayEngine:
     """One Ray task per scene (see the module doc). ``address``: a cluster to join (None: a
     local Ray instance); ``gpus_per_task``: None = 1 when the cluster has GPUs, else 0;
-    ``cpus_per_task``: CPU threads of each task; ``retries``: Ray's retries of a lost worker."""
+    ``cpus_per_task``: CPU threads of each task; ``retries``: Ray's retries of a lost worker;
+    ``poll_s``: how often the driver looks for tasks that have started."""
 
     def __init__(self, address: str | None = None, gpus_per_task: float | None = None, cpus_per_task: int = 1,
-                 retries: int = 2, workers: int | None = None):  # fmt: skip
+                 retries: int = 2, workers: int | None = None, poll_s: float = 0.5):  # fmt: skip
         try:
             import ray  # noqa: F401
         except ImportError:
             raise ImportError('the ray engine needs Ray: pip install "lit-boot[ray]"') from None
         self.address, self.gpus_per_task, self.cpus_per_task = address, gpus_per_task, cpus_per_task
-        self.retries, self.workers = retries, workers
+        self.retries, self.workers, self.poll_s = retries, workers, poll_s
 
     def describe(self) -> str:
         return f"ray ({self.address or 'a local instance'}), {self.cpus_per_task} CPU(s) per task"
@@ -185,18 +188,23 @@ class RayEngine:
             gpus = 1 if ray.cluster_resources().get("GPU", 0) >= 1 else 0
         remote = ray.remote(_ray_task).options(num_cpus=self.cpus_per_task, num_gpus=gpus, max_retries=self.retries,
                                                retry_exceptions=False)  # fmt: skip
-        pending = {}
+        pending, started = {}, set()
         for job in jobs:
+            started_file(job.out, job.name).unlink(missing_ok=True)  # an earlier attempt's
             pending[remote.remote(job, self.cpus_per_task)] = job
-            on_start(job.name)
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            job = pending.pop(done[0])
-            try:
-                record = ray.get(done[0])
-            except ray.exceptions.RayError as err:  # the worker was lost more than `retries` times
-                record = {"state": "lost", "error": f"Ray task lost: {type(err).__name__}: {str(err).splitlines()[0]}"}
-            on_end(job.name, record)
+        while pending:  # a task is "running" once its worker has started it, not while Ray queues it
+            done, _ = ray.wait(list(pending), num_returns=1, timeout=self.poll_s)
+            for ref, job in pending.items():
+                if job.name not in started and (ref in done or started_file(job.out, job.name).exists()):
+                    started.add(job.name)
+                    on_start(job.name)
+            for ref in done:
+                job = pending.pop(ref)
+                try:
+                    record = ray.get(ref)
+                except ray.exceptions.RayError as err:  # the worker was lost more than `retries` times
+                    record = {"state": "lost", "error": f"Ray task lost: {type(err).__name__}: {str(err).splitlines()[0]}"}
+                on_end(job.name, record)
 
 
 def make_engine(engine: str, workers: int = 1, ray_address: str | None = None, retries: int = 2,

@@ -27,13 +27,19 @@ import warnings
 from pathlib import Path
 from typing import Any, Iterator
 
-__all__ = ["run_task", "worker_environment", "task_files", "read_record", "write_record"]
+__all__ = ["run_task", "worker_environment", "task_files", "started_file", "read_record", "write_record"]
 
 
 def task_files(out: str | os.PathLike, name: str) -> tuple[Path, Path, Path]:
     """(run folder, record file, log file) of task ``name`` in the dataset folder ``out``."""
     out = Path(out)
     return out / "scenes" / name, out / "tasks" / f"{name}.json", out / "tasks" / f"{name}.log"
+
+
+def started_file(out: str | os.PathLike, name: str) -> Path:
+    """The marker task ``name``'s worker writes when it starts ({"pid": ...}): how an engine
+    whose workers start on their own schedule (Ray) tells a running task from a queued one."""
+    return Path(out) / "tasks" / f"{name}.started"
 
 
 def write_record(path: Path, record: dict[str, Any]) -> None:
@@ -100,6 +106,7 @@ def run_task(task: dict[str, Any], out: str, config: dict[str, Any], threads: in
 
     spec = Task.from_dict(task)
     run_dir, record_file, log_file = task_files(out, spec.name)
+    write_record(started_file(out, spec.name), {"pid": os.getpid()})
     with _task_log(log_file):
         log = logging.getLogger("lit_boot.dataset")
         log.info("task %s: start (pid %d)", spec.name, os.getpid())
