@@ -165,6 +165,26 @@ def test_a_bad_video_fails_its_own_task_and_the_others_go_on(scene_dirs, tmp_pat
     assert "broken.mp4" in (tmp_path / "data" / "summary.csv").read_text()
 
 
+def test_a_task_that_ran_out_of_memory_is_run_again(scene_dirs, tmp_path, monkeypatch):
+    from lit_boot.dataset import worker
+
+    real, calls = worker._bootstrap, []
+
+    def full_once(task, run_dir, config):  # the GPU was full the first time (another task on it)
+        calls.append(task.name)
+        if calls.count(task.name) == 1 and task.name == "s1":
+            raise torch.OutOfMemoryError("CUDA out of memory. Tried to allocate 2.00 GiB")
+        return real(task, run_dir, config)
+
+    monkeypatch.setattr(worker, "_bootstrap", full_once)
+    result = run_dataset(tasks_of(scene_dirs), tmp_path / "data", CONFIG, workers=0, retries=1)
+    tasks = json.loads((tmp_path / "data" / "manifest.json").read_text())["tasks"]
+    assert calls.count("s1") == 2 and tasks["s1"]["state"] == "done" and tasks["s1"]["attempts"] == 1
+    assert result.counts["done"] == len(scene_dirs)
+    log = (tmp_path / "data" / "tasks" / "s1.log").read_text()
+    assert "ran out of memory" in log
+
+
 def test_chunks_are_stitched_and_counted_once(tmp_path):
     scene = lit_boot.make_scene(motion="walk", frames=7, height=64, width=96, seed=3)
     lit_boot.save_scene(scene, tmp_path / "long")

@@ -15,7 +15,8 @@ The dataset folder::
 Reruns: a task that is done is never run again; pending, lost and failed ones are; a rerun with
 other settings is refused (:class:`~lit_boot.dataset.manifest.SettingsChangedError`). A task
 whose worker died without a result (killed, out of memory) is retried up to ``retries`` times
-(by the driver for the local engine, by Ray for the ray engine).
+(by the driver for the local engine, by Ray for the ray engine), and so is one that ran out of
+memory (a CUDA out-of-memory error: by the driver for both engines).
 """
 
 from __future__ import annotations
@@ -172,7 +173,8 @@ def _run_tasks(manifest: Manifest, engine: Any, out: Path, config: dict, retries
         state = record["state"]
         if state == "lost":
             attempts = manifest.tasks[name]["attempts"] + 1
-            again = isinstance(engine, LocalEngine) and attempts <= retries
+            # Ray retries its lost workers itself; an out-of-memory record is the driver's to retry
+            again = (isinstance(engine, LocalEngine) or bool(record.get("retry"))) and attempts <= retries
             manifest.mark(name, "pending" if again else "failed", attempts=attempts, error=record["error"])
             log.warning("task %s: %s%s", name, record["error"], "; retried" if again else "; not retried")
             if again:

@@ -100,8 +100,12 @@ def run_task(task: dict[str, Any], out: str, config: dict[str, Any], threads: in
              gpu: str | None = None) -> dict[str, Any]:  # fmt: skip
     """Run one task (a :meth:`Task.to_dict`) with :class:`BootstrapConfig` ``config`` (a dict) into
     the dataset folder ``out``; returns (and writes) its record. An error fails this task only:
-    it is recorded with its message, and the traceback goes to the task's log."""
+    it is recorded with its message, and the traceback goes to the task's log. Running out of
+    memory (CUDA's or the host's) is recorded as ``{"state": "lost", "retry": True}``: the
+    driver runs the task again, as it does a lost worker's."""
     worker_environment(threads, gpu)
+    import torch  # after worker_environment: its threads and GPU are set
+
     from .tasks import Task
 
     spec = Task.from_dict(task)
@@ -112,6 +116,9 @@ def run_task(task: dict[str, Any], out: str, config: dict[str, Any], threads: in
         log.info("task %s: start (pid %d)", spec.name, os.getpid())
         try:
             record = {"state": "done", "result": {**_bootstrap(spec, run_dir, config), "worker": _worker_info()}}
+        except (MemoryError, torch.OutOfMemoryError) as err:  # the device (or RAM) was full now, maybe not later
+            log.error("task %s ran out of memory:\n%s", spec.name, traceback.format_exc())
+            record = {"state": "lost", "retry": True, "error": f"out of memory: {type(err).__name__}: {err}"}
         except Exception as err:  # a bad input fails its own task; the others go on
             log.error("task %s failed:\n%s", spec.name, traceback.format_exc())
             record = {"state": "failed", "error": f"{type(err).__name__}: {err}"}
