@@ -172,11 +172,12 @@ def test_with_the_gap_the_person_beside_the_sketch_follows_it(shared, tmp_path):
     errors = {}
     for gap in (0.0, 2.0):
         torch.manual_seed(0)
-        model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth"), "sketch": SketchConfig(size=2, guard=False)},
-                        lr=3e-4, crop_margin=0, sketch_weight=5.0, sketch_gap=gap)  # fmt: skip
+        weights, sketch = str(shared / "checkpoints/raft-small.pth"), SketchConfig(size=2, guard=False)
+        model = FlowTTT(**{**WARM, "weights": weights, "sketch": sketch}, lr=3e-4, crop_margin=0, sketch_weight=5.0,
+                        sketch_gap=gap)  # fmt: skip
         data = SceneFlowData(wide, pose_source="gt", shuffle=False)
         trainer(tmp_path, epochs=6).fit(model, datamodule=data)
         tuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])
-        beside = body & ~model.sketch_masks & model.person_region(model.sketch_masks, 4)  # the person next to the sketch
+        beside = body & ~model.sketch_masks & model.person_region(model.sketch_masks, 4)  # the person beside it
         errors[gap] = float((tuned - wide.gt.flow.float()).norm(dim=1)[beside].mean())
     assert errors[2.0] < 0.9 * errors[0.0], errors  # measured: 2.09 against 2.54 px

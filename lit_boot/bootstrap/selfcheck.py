@@ -249,7 +249,8 @@ def check_stage(
 
     flows, record, weight = self_check(scene.frames, initial, tuned, person, config.self_check_margin,
                                        config.self_check_tile, config.self_check_blend,
-                                       config.self_check_window, config.self_check_z, config.self_check_own)  # fmt: skip
+                                       config.self_check_window, config.self_check_z,
+                                       config.self_check_own)  # fmt: skip
     return flows, {**record, "tuned_metrics": scene_flow_metrics(scene.gt, tuned)}, weight
 
 

@@ -281,8 +281,7 @@ def stitch_estimates(parts: list[tuple[int, PoseEstimates]], num_frames: int) ->
     """Per-chunk pose estimates, (start frame, PoseEstimates of T_c rows) in order of start, as
     one PoseEstimates of ``num_frames`` rows: keypoints2d (weighted by their confidences too),
     keypoints_conf, joints3d and the cameras' params and crops by :func:`stitch_sequences` (the
-    cross-fade); layouts, camera
-    model, image_size must agree across parts. ``metadata``: {"chunks": [[start, stop], ...],
+    cross-fade); layouts, camera model, image_size must agree across parts. ``metadata``: {"chunks": [[start, stop], ...],
     "parts": [each part's metadata]}."""
     from ..data.readers.pose_file import PoseEstimates
 

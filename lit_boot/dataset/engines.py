@@ -203,7 +203,8 @@ class RayEngine:
                 try:
                     record = ray.get(ref)
                 except ray.exceptions.RayError as err:  # the worker was lost more than `retries` times
-                    record = {"state": "lost", "error": f"Ray task lost: {type(err).__name__}: {str(err).splitlines()[0]}"}
+                    why = f"{type(err).__name__}: {str(err).splitlines()[0]}"
+                    record = {"state": "lost", "error": f"Ray task lost: {why}"}
                 on_end(job.name, record)
 
 
