@@ -192,10 +192,12 @@ class RayEngine:
         for job in jobs:
             started_file(job.out, job.name).unlink(missing_ok=True)  # an earlier attempt's
             pending[remote.remote(job, self.cpus_per_task)] = job
+        tasks_dir = started_file(jobs[0].out, "").parent if jobs else None  # every job's: one dataset folder
         while pending:  # a task is "running" once its worker has started it, not while Ray queues it
             done, _ = ray.wait(list(pending), num_returns=1, timeout=self.poll_s)
+            markers = {p.stem for p in tasks_dir.glob("*.started")}  # one listing per poll, not a stat per task
             for ref, job in pending.items():
-                if job.name not in started and (ref in done or started_file(job.out, job.name).exists()):
+                if job.name not in started and (ref in done or job.name in markers):
                     started.add(job.name)
                     on_start(job.name)
             for ref in done:

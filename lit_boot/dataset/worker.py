@@ -50,12 +50,13 @@ def write_record(path: Path, record: dict[str, Any]) -> None:
 
 
 def read_record(path: Path) -> dict[str, Any] | None:
-    """The record a worker wrote (None if none, or unreadable: a write cut short)."""
+    """The record a worker wrote (done, failed, or lost with ``retry``: it ran out of memory);
+    None if none, or unreadable (a write cut short)."""
     try:
         record = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    return record if isinstance(record, dict) and record.get("state") in ("done", "failed") else None
+    return record if isinstance(record, dict) and record.get("state") in ("done", "failed", "lost") else None
 
 
 def worker_environment(threads: int | None, gpu: str | None) -> None:
