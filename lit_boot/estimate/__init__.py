@@ -4,8 +4,24 @@
 weak-perspective cameras; ``lit-boot estimate-pose VIDEO --out poses.npz`` writes them.
 MediaPipe is imported only when an estimate is made (``pip install "lit-boot[mediapipe]"``);
 the conversions in :mod:`.world_to_lsp` and :mod:`.tracking` need no MediaPipe.
+
+``PersonDetector(model="yolox_nano").detect_frames(frames)`` gives each frame's person boxes
+(YOLOX through onnxruntime, which the same extra installs and which is imported only when a
+detector is built); ``main_person_boxes(detections)`` follows one person over the frames.
 """
 
+from .detector import (
+    ORT_INSTALL_HINT,
+    PERSON_CLASS,
+    OnnxRuntimeUnavailable,
+    PersonDetector,
+    decode_yolox,
+    import_onnxruntime,
+    letterbox,
+    select_boxes,
+    to_frame,
+)
+from .detector_weights import DETECTOR_MODELS, resolve_detector_weights
 from .mediapipe_pose import (
     INSTALL_HINT,
     MEDIAPIPE_VERSION,
@@ -18,6 +34,7 @@ from .mediapipe_pose import (
     run_mediapipe,
     summary_line,
 )
+from .person_track import main_person_boxes
 from .tracking import JUMP_POLICIES, drop_jumps, find_jumps
 from .world_to_lsp import (
     HEAD_TOP_FACTOR,
@@ -40,6 +57,18 @@ __all__ = [
     "poses_from_landmarks",
     "run_mediapipe",
     "summary_line",
+    "ORT_INSTALL_HINT",
+    "PERSON_CLASS",
+    "OnnxRuntimeUnavailable",
+    "PersonDetector",
+    "decode_yolox",
+    "import_onnxruntime",
+    "letterbox",
+    "select_boxes",
+    "to_frame",
+    "DETECTOR_MODELS",
+    "resolve_detector_weights",
+    "main_person_boxes",
     "JUMP_POLICIES",
     "drop_jumps",
     "find_jumps",
