@@ -215,6 +215,14 @@ def test_the_input_size_is_read_from_the_model(tmp_path):
     assert det.input_size == (32, 64)
     found = det.detect(torch.zeros(3, 48, 96, dtype=torch.uint8))
     assert torch.allclose(found, torch.tensor([[11.5, 5.5, 59.5, 41.5, 0.81]]), atol=1e-4)
+    # An export whose input size is not fixed needs it given; a fixed one must not be contradicted.
+    dynamic = _tiny_model(tmp_path / "dynamic.onnx", _raw(64, 64, PERSON_19), (1, 3, "height", "width"))
+    with pytest.raises(ValueError, match=r"input_size: dynamic\.onnx's input size is not fixed .*; pass \(h, w\)"):
+        PersonDetector(dynamic, threads=1)
+    given = PersonDetector(dynamic, threads=1, input_size=(64, 64))
+    assert given.input_size == (64, 64) and given.detect(torch.zeros(3, 48, 96, dtype=torch.uint8)).shape == (1, 5)
+    with pytest.raises(ValueError, match=r"input_size: the model wide\.onnx takes 32x64, got \(64, 64\)"):
+        PersonDetector(det.path, threads=1, input_size=(64, 64))
 
 
 @needs_onnxruntime
@@ -223,9 +231,11 @@ def test_the_input_size_is_read_from_the_model(tmp_path):
     [
         ("missing", r"detector model file .*absent\.onnx does not exist"),
         ("not_onnx", r"bad\.onnx: not an ONNX model onnxruntime can load"),
-        ("wrong_output", r"wrong\.onnx: expected an output of shape \[1, 84, 5 \+ classes\] .*got output \[1, 10, 85\]"),
+        ("wrong_output",
+         r"wrong\.onnx: expected an output of shape \[1, 84, 5 \+ classes\] .*got output \[1, 10, 85\]"),
         ("wrong_input", r"gray\.onnx: expected one input of shape \[1, 3, h, w\] .*got images \[1, 1, 64, 64\]"),
         ("odd_size", r"odd\.onnx: expected an input size in multiples of 32 px, got 60x64"),
+        ("decoded", r"decoded\.onnx: the output's box sizes look like pixels, not log sizes .*--decode_in_inference"),
     ],
 )  # fmt: skip
 def test_a_bad_model_file_is_one_clear_error_naming_it(tmp_path, case, pattern):
@@ -238,8 +248,10 @@ def test_a_bad_model_file_is_one_clear_error_naming_it(tmp_path, case, pattern):
         path = _tiny_model(tmp_path / "gray.onnx", _raw(64, 64, {}), (1, 1, 64, 64))
     elif case == "odd_size":
         path = _tiny_model(tmp_path / "odd.onnx", np.zeros((1, 10, 85), np.float32), (1, 3, 60, 64))
+    elif case == "decoded":  # an export that decodes itself: centres and sizes in pixels
+        path = _tiny_model(tmp_path / "decoded.onnx", np.full((1, 84, 85), 40.0, np.float32))
     with pytest.raises((ValueError, FileNotFoundError), match=pattern) as err:
-        PersonDetector(path, threads=1)
+        PersonDetector(path, threads=1).detect(torch.zeros(3, 48, 96, dtype=torch.uint8))
     assert "\n" not in str(err.value)
 
 
@@ -250,6 +262,8 @@ def test_bad_frames_are_refused(tmp_path):
         det.detect(torch.zeros(3, 48, 96))
     with pytest.raises(ValueError, match=r"frames: expected a uint8 RGB tensor of shape \(T, 3, H, W\), got \(3, 48"):
         det.detect_frames(torch.zeros(3, 48, 96, dtype=torch.uint8))
+    with pytest.raises(ValueError, match=r"providers: expected some of \[.*CPUExecutionProvider.*\], got \['NoSuch"):
+        PersonDetector(det.path, providers=["NoSuchExecutionProvider"])
 
 
 def test_without_onnxruntime_the_error_names_the_extra(monkeypatch):

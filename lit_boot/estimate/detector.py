@@ -188,14 +188,19 @@ class PersonDetector:
         options.intra_op_num_threads = threads or torch.get_num_threads()
         options.inter_op_num_threads = 1
         options.log_severity_level = 3  # errors only: onnxruntime's warnings are not lit-boot's output
+        missing = [p for p in providers if p not in ort.get_available_providers()]
+        if missing or not providers:
+            raise ValueError(f"providers: expected some of {ort.get_available_providers()}, got {list(providers)}")
         try:
             self.session = ort.InferenceSession(str(self.path), sess_options=options, providers=list(providers))
         except Exception as err:  # noqa: BLE001 - onnxruntime raises its own types for a bad file
             first = str(err).strip().splitlines()[0] if str(err).strip() else ""
-            raise ValueError(f"{self.path}: not an ONNX model onnxruntime can load ({type(err).__name__}: {first})") from None
+            raise ValueError(
+                f"{self.path}: not an ONNX model onnxruntime can load ({type(err).__name__}: {first})"
+            ) from None
         self.input_name, self.input_size = self._check_input(input_size)
         self.output_name, self.num_classes = self._check_output()
-        log.info("person detector %s: input %dx%d, %s classes", self.path.name, *self.input_size, self.num_classes)
+        log.debug("person detector %s: input %dx%d, %s classes", self.path.name, *self.input_size, self.num_classes)
 
     def __repr__(self) -> str:
         h, w = self.input_size
@@ -241,6 +246,11 @@ class PersonDetector:
         anchors = yolox_grids(*self.input_size)[0].shape[0]
         if raw.ndim != 3 or raw.shape[:2] != (1, anchors) or raw.shape[2] < 6 + self.class_id:
             raise ValueError(f"{self.path}: expected an output of shape {self._expected()}, got {list(raw.shape)}")
+        if float(np.median(raw[0, :, 2:4])) > 8:  # the raw head's log sizes stay near 2; e^8 x 8 px is absurd
+            raise ValueError(
+                f"{self.path}: the output's box sizes look like pixels, not log sizes in stride units: an export "
+                "with --decode_in_inference? expected YOLOX's raw head (export it without that option)"
+            )
         return raw
 
     def detect(self, frame: torch.Tensor) -> torch.Tensor:
