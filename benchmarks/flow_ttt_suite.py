@@ -27,7 +27,7 @@ from pathlib import Path
 import lightning as L
 import torch
 
-from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig, load_raft, predict_flow
+from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig, load_raft, person_region, predict_flow
 from lit_boot.metrics import EndPointError, PointEndPointError
 from lit_boot.synth import make_scene
 
@@ -93,7 +93,7 @@ def fine_tune(scene, source: str, args) -> tuple[dict[str, float], dict[str, flo
     if args.composite_margins:  # the tuned flow near the sketch only, pretrained RAFT's elsewhere
         original = predict_all(load_raft("raft_small", args.weights), scene)
         for margin in [int(m) for m in args.composite_margins.split(",")]:
-            region = model.person_region(model.sketch_masks, margin)[:, None]
+            region = person_region(model.sketch_masks, margin)[:, None]
             epe[f"composite_{margin}"] = score(torch.where(region, tuned, original), scene)
     return epe, model.target_report, seconds
 

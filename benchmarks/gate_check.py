@@ -98,13 +98,14 @@ def run_scene(name: str, dm: SceneFlowData, args, table: dict[str, dict[str, flo
     model = FlowTTT(weights=args.weights, train_updates=args.updates, predict_updates=args.updates,
                     sketch=SketchConfig(gate="photometric+fb"))  # fmt: skip
     state = {k: v.clone() for k, v in model.raft.state_dict().items()}
-    base, bw = model.base_flows(dm)
+    inputs = dm.sketch_inputs()  # (loads the scene)
+    base, bw = model.base_flows(dm.scene)
     model.sketch_config = SketchConfig()
-    model.targets_from(dm, base)
+    model.targets_from(dm.scene, base, inputs=inputs)
     ungated = model.sketch_masks.clone()
     for key, cfg in variants(args.margins, args.search).items():
         model.sketch_config = cfg
-        report = model.targets_from(dm, base, bw)
+        report = model.targets_from(dm.scene, base, bw, inputs=inputs)
         s = sums(model, dm, base, ungated)
         s["kept"] = report.get("target/gate_kept_fraction", 1.0)
         if args.finetune and (key == "off" or key in args.finetune_variants):

@@ -42,6 +42,7 @@ from bootstrap_suite import GATE, SCENES, SHARED  # noqa: E402
 from lit_boot.bootstrap import Bootstrap  # noqa: E402
 from lit_boot.metrics import scene_flow_metrics  # noqa: E402
 from lit_boot.bootstrap.selfcheck import region_labels, region_names, self_check  # noqa: E402
+from lit_boot.flow import person_region  # noqa: E402
 from lit_boot.synth import make_scene  # noqa: E402
 
 KEYS = ("epe", "epe_person", "epe_background")
@@ -96,7 +97,7 @@ def run_scene(name: str, scene, mode: str, epochs: int, args) -> dict:
     result = boot.run()
     print(f"{name}: flow_1 in {time.perf_counter() - start:.0f} s", flush=True)
     run = {"initial": result.initial_flows, "tuned": result.flows,
-           "person": boot.models[0].person_region(boot.models[0].sketch_masks)}  # fmt: skip
+           "person": person_region(boot.models[0].sketch_masks)}  # fmt: skip
     torch.save(run, cache)
     return run
 

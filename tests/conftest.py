@@ -42,3 +42,16 @@ def no_user_checkpoints(request, tmp_path_factory, monkeypatch):
 
         empty = tmp_path_factory.mktemp("no_user_checkpoints")
         monkeypatch.setattr(weights, "_default_dirs", lambda: [empty])
+
+
+@pytest.fixture
+def trainer(tmp_path):
+    """A quiet Lightning Trainer factory for tiny fits on the CPU: ``trainer(epochs=1, **kw)``
+    (no logger, checkpoints, bars, summary or sanity check; ``kw`` are more Trainer arguments)."""
+    import lightning as L
+
+    def make(epochs: int = 1, **kw) -> L.Trainer:
+        return L.Trainer(max_epochs=epochs, default_root_dir=tmp_path, logger=False, enable_checkpointing=False,
+                         enable_progress_bar=False, enable_model_summary=False, num_sanity_val_steps=0, **kw)  # fmt: skip
+
+    return make

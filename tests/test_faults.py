@@ -21,7 +21,7 @@ from lit_boot.bootstrap import runner as runner_module
 from lit_boot.bootstrap.lock import RunLock, RunLockedError
 from lit_boot.data import read_flows
 from lit_boot.finite import FiniteGuard
-from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig
+from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig, SketchLoss
 from lit_boot.optim import adam
 from lit_boot.pose import PoseData, PoseRefiner, load_pose_result, make_trainer
 
@@ -66,13 +66,13 @@ def guard_of(trainer: L.Trainer) -> FiniteGuard:
 def test_flow_ttt_stops_at_a_nan_loss_with_the_last_good_weights(tiny_scene):
     torch.manual_seed(0)
     model = FlowTTT(lr=1e-3, sketch=SketchConfig(size=3, guard=False), **RANDOM_RAFT)
-    loss, calls = model._loss, []
+    loss, calls = model.loss_fn.forward, []
 
     def nan_at_the_third_step(*args):
         calls.append(1)
         return loss(*args) * (float("nan") if len(calls) == 3 else 1.0)
 
-    model._loss = nan_at_the_third_step
+    model.loss_fn.forward = nan_at_the_third_step
     snapshots = Snapshots()
     trainer = L.Trainer(max_epochs=2, logger=False, enable_checkpointing=False, enable_progress_bar=False,
                         enable_model_summary=False, limit_val_batches=0, callbacks=[snapshots])  # fmt: skip
@@ -147,13 +147,13 @@ def test_a_stage_with_a_nan_is_rolled_back_and_recorded(stage, tiny_scene, tmp_p
 
         monkeypatch.setattr(PoseRefiner, "total_loss", nan_loss)
     else:
-        loss, calls = FlowTTT._loss, []
+        loss, calls = SketchLoss.forward, []
 
         def nan_loss(self, *args):  # flow_1 takes 3 steps: the 5th is flow_2's second
             calls.append(1)
             return loss(self, *args) * (float("nan") if len(calls) == 5 else 1.0)
 
-        monkeypatch.setattr(FlowTTT, "_loss", nan_loss)
+        monkeypatch.setattr(SketchLoss, "forward", nan_loss)
     run = tmp_path / "run"
     with pytest.warns(UserWarning, match="FiniteGuard: non-finite loss"):
         result = bootstrap(tiny_scene, run, flow=RANDOM_RAFT, **FAST)

@@ -11,7 +11,6 @@ import torch
 from lit_boot.flow import (
     GATE_REPORT_KEYS,
     FlowTTT,
-    SceneFlowData,
     SketchConfig,
     forward_backward_check,
     gate_sketch,
@@ -130,15 +129,15 @@ def test_fb_gate_also_keeps_pixels_where_the_base_fails_its_check(scene, base):
 
 def test_flow_ttt_gates_its_targets_and_reports_the_counts(scene, shared):
     weights = str(shared / "checkpoints/raft-small.pth")
-    dm = SceneFlowData(scene, pose_source="gt")
+    inputs = sketch_inputs(scene, "gt")
     off = FlowTTT(weights=weights, train_updates=8, sketch=SketchConfig(**GUARDLESS))
-    base, bw = off.base_flows(dm)
+    base, bw = off.base_flows(scene)
     assert bw is None  # no backward pass unless the fb gate asks for it
-    report_off = off.targets_from(dm, base)
+    report_off = off.targets_from(scene, base, inputs=inputs)
     assert not any(k.startswith("target/gate_") for k in report_off)
     gated = SketchConfig(gate="photometric+fb", gate_level="bone", **GUARDLESS)
     on = FlowTTT(weights=weights, train_updates=8, sketch=gated)
-    report = on.build_targets(dm)
+    report = on.prepare(scene, inputs)
     assert {f"target/{k}" for k in GATE_REPORT_KEYS} <= report.keys()
     kept = on.sketch_masks.sum() / off.sketch_masks.sum()
     assert report["target/gate_kept_fraction"] == pytest.approx(float(kept)) and 0.5 < kept < 1.0

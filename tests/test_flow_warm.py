@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import lightning as L
 import pytest
 import torch
 
-from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig, predict_flow
+from lit_boot.flow import FlowTTT, SceneFlowData, SketchConfig, person_region, predict_flow
 from lit_boot.flow.raft import load_raft
 from lit_boot.flow.warm import MIN_CELLS, FeatureCache, box_region, crop_box, paste
 from lit_boot.synth import make_scene
@@ -18,12 +17,6 @@ WARM = dict(weights=None, train_parts="update_block", warm_start=True, train_upd
 @pytest.fixture(scope="module")
 def scene():
     return make_scene(motion="run", frames=3, height=64, width=96, seed=0)
-
-
-def trainer(tmp_path, epochs=1) -> L.Trainer:
-    return L.Trainer(max_epochs=epochs, default_root_dir=tmp_path, logger=False, enable_checkpointing=False,
-                     enable_progress_bar=False, enable_model_summary=False, num_sanity_val_steps=0,
-                     limit_val_batches=0)  # fmt: skip
 
 
 def test_the_cache_holds_each_frames_features_once_and_rafts_own_flow(scene):
@@ -75,28 +68,28 @@ def test_warm_start_needs_frozen_encoders():
         FlowTTT(weights=None, warm_start=True)
 
 
-def test_warm_fine_tune_follows_the_target_and_pasted_keeps_the_untuned_flow_outside_the_crop(shared, tmp_path):
+def test_warm_fine_tune_follows_the_target_and_pasted_keeps_the_untuned_flow_outside_the_crop(shared, trainer):
     torch.manual_seed(0)
     wide = make_scene(motion="run", frames=3, height=96, width=256, seed=0)  # the crop is narrower than the frame
     model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0)
     assert model.hparams.paste_crop  # the default
     data = SceneFlowData(wide, pose_source="gt", shuffle=False)
-    untuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])  # RAFT's own flow: builds the cache
-    cache = model.cache
+    untuned = torch.cat([o["flow"] for o in trainer().predict(model, datamodule=data)])  # RAFT's own flow: builds the cache
+    cache = model.warm.cache
     assert cache is not None
     torch.testing.assert_close(untuned, cache.base)
     encoders = {k: v.clone() for k, v in model.raft.state_dict().items() if k.startswith(("feature_encoder", "context_encoder"))}
-    trainer(tmp_path, epochs=3).fit(model, datamodule=data)
-    assert model.cache is cache  # built once: the initial prediction's features are reused
+    trainer(epochs=3, limit_val_batches=0).fit(model, datamodule=data)
+    assert model.warm.cache is cache  # built once: the initial prediction's features are reused
     assert all(torch.equal(v, model.raft.state_dict()[k]) for k, v in encoders.items())
     torch.testing.assert_close(model.targets[~model.sketch_masks[:, None].expand_as(untuned)],
                                untuned[~model.sketch_masks[:, None].expand_as(untuned)])  # painted over it  # fmt: skip
-    tuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])
+    tuned = torch.cat([o["flow"] for o in trainer().predict(model, datamodule=data)])
     painted = model.sketch_masks[:, None].expand_as(tuned)
     before = (untuned - model.targets).abs()[painted].mean()
     after = (tuned - model.targets).abs()[painted].mean()
     assert after < 0.95 * before  # measured: 0.88
-    for i, box in enumerate(model.boxes):  # outside its box a pair's flow is the untuned one, exactly
+    for i, box in enumerate(model.warm.boxes):  # outside its box a pair's flow is the untuned one, exactly
         (fy0, fy1, fx0, fx1), _ = box_region(box, cache.pad, tuned.shape[-2:])
         outside = torch.ones(tuned.shape[-2:], dtype=torch.bool)
         outside[fy0:fy1, fx0:fx1] = False
@@ -112,20 +105,20 @@ def test_the_cache_is_built_with_the_untuned_network_after_resuming_tuned_weight
         for p in model.raft.update_block.parameters():
             p.add_(0.05 * torch.randn_like(p))
     tuned = model.raft.update_block.state_dict()
-    torch.testing.assert_close(model.warm_cache(scene.frames).base, own)
+    torch.testing.assert_close(model.warm.build(scene.frames).base, own)
     assert all(torch.equal(v, model.raft.update_block.state_dict()[k]) for k, v in tuned.items())  # restored
 
 
-def test_after_a_fit_other_frames_are_predicted_warm_from_their_own_untuned_flow(scene, tmp_path):
+def test_after_a_fit_other_frames_are_predicted_warm_from_their_own_untuned_flow(scene, trainer):
     torch.manual_seed(0)
     model = FlowTTT(lr=1e-3, **WARM)
-    trainer(tmp_path).fit(model, datamodule=SceneFlowData(scene, pose_source="gt"))
+    trainer(limit_val_batches=0).fit(model, datamodule=SceneFlowData(scene, pose_source="gt"))
     other = make_scene(motion="walk", frames=2, height=64, width=96, seed=1)
-    flow = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=SceneFlowData(other, shuffle=False))])
-    cache = model.cache
-    assert cache.fits(other.frames) and model.boxes is None  # rebuilt for these frames, the fit's boxes dropped
+    flow = torch.cat([o["flow"] for o in trainer().predict(model, datamodule=SceneFlowData(other, shuffle=False))])
+    cache = model.warm.cache
+    assert cache.fits(other.frames) and model.warm.boxes is None  # rebuilt for these frames, the fit's boxes dropped
     untuned = FlowTTT(**WARM)
-    untuned.raft.load_state_dict({**model.raft.state_dict(), **model._untuned})
+    untuned.raft.load_state_dict({**model.raft.state_dict(), **model.warm.untuned})
     with torch.no_grad():
         torch.testing.assert_close(cache.base, predict_flow(untuned.raft.eval(), other.frames[0], other.frames[1], 3))
         whole = (0, cache.cells[0], 0, cache.cells[1])
@@ -135,38 +128,31 @@ def test_after_a_fit_other_frames_are_predicted_warm_from_their_own_untuned_flow
     assert not torch.equal(flow, cache.base)  # the tuned iterations moved it
 
 
-def test_without_paste_the_tuned_update_block_predicts_the_whole_frame_from_the_untuned_flow(shared, tmp_path):
+def test_without_paste_the_tuned_update_block_predicts_the_whole_frame_from_the_untuned_flow(shared, trainer):
     torch.manual_seed(0)
     wide = make_scene(motion="run", frames=3, height=96, width=256, seed=0)
     model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0,
                     paste_crop=False)  # fmt: skip
     data = SceneFlowData(wide, pose_source="gt", shuffle=False)
-    trainer(tmp_path, epochs=2).fit(model, datamodule=data)
-    tuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])
-    for i, box in enumerate(model.boxes):  # trained on the crop, predicted everywhere from the untuned flow
-        (fy0, fy1, fx0, fx1), _ = box_region(box, model.cache.pad, tuned.shape[-2:])
+    trainer(epochs=2, limit_val_batches=0).fit(model, datamodule=data)
+    tuned = torch.cat([o["flow"] for o in trainer().predict(model, datamodule=data)])
+    for i, box in enumerate(model.warm.boxes):  # trained on the crop, predicted everywhere from the untuned flow
+        (fy0, fy1, fx0, fx1), _ = box_region(box, model.warm.cache.pad, tuned.shape[-2:])
         outside = torch.ones(tuned.shape[-2:], dtype=torch.bool)
         outside[fy0:fy1, fx0:fx1] = False
-        assert not torch.equal(tuned[i][:, outside], model.cache.base[i][:, outside])
-        assert (tuned[i] - model.cache.base[i]).norm(dim=0)[outside].mean() < 0.5  # a warm start: near it
+        assert not torch.equal(tuned[i][:, outside], model.warm.cache.base[i][:, outside])
+        assert (tuned[i] - model.warm.cache.base[i]).norm(dim=0)[outside].mean() < 0.5  # a warm start: near it
 
 
-def test_the_gap_beside_the_sketch_gets_no_loss_and_the_far_pixels_are_held():
-    mask = torch.zeros(1, 40, 40, dtype=torch.bool)
-    mask[0, 20, 10:30] = True  # a painted bone
+def test_the_gap_is_given_in_footprint_radii():
     model = FlowTTT(**{**WARM, "sketch": SketchConfig(size=2)}, sketch_weight=5.0, sketch_gap=1.5)
-    assert model.gap_px == 3  # 1.5 footprint radii of 2 px
-    weight = model.loss_weights(mask)[0]
-    assert torch.all(weight[mask[0]] == 5.0)
-    assert torch.all(weight[17:20, 10:30] == 0) and torch.all(weight[21:24, 10:30] == 0)  # within 3 px: no loss
-    assert torch.all(weight[:16] == 1) and torch.all(weight[25:] == 1)  # beyond: held to the base flow
-    plain = FlowTTT(**{**WARM, "sketch": SketchConfig(size=2)}, sketch_weight=5.0).loss_weights(mask)[0]
-    assert torch.all(plain[~mask[0]] == 1)  # without a gap every unpainted pixel is held
+    assert model.loss_fn.gap == 3 and model.loss_fn.sketch_weight == 5.0  # 1.5 footprint radii of 2 px
+    assert FlowTTT(**{**WARM, "sketch": SketchConfig(size=4)}, sketch_gap=2.0).loss_fn.gap == 8
     with pytest.raises(ValueError, match="sketch_gap"):
         FlowTTT(weights=None, sketch_gap=-1)
 
 
-def test_with_the_gap_the_person_beside_the_sketch_follows_it(shared, tmp_path):
+def test_with_the_gap_the_person_beside_the_sketch_follows_it(shared, trainer):
     wide = make_scene(motion="run", frames=3, height=96, width=256, seed=0)
     body = wide.gt.person_mask[:-1]
     errors = {}
@@ -176,8 +162,8 @@ def test_with_the_gap_the_person_beside_the_sketch_follows_it(shared, tmp_path):
         model = FlowTTT(**{**WARM, "weights": weights, "sketch": sketch}, lr=3e-4, crop_margin=0, sketch_weight=5.0,
                         sketch_gap=gap)  # fmt: skip
         data = SceneFlowData(wide, pose_source="gt", shuffle=False)
-        trainer(tmp_path, epochs=6).fit(model, datamodule=data)
-        tuned = torch.cat([o["flow"] for o in trainer(tmp_path).predict(model, datamodule=data)])
-        beside = body & ~model.sketch_masks & model.person_region(model.sketch_masks, 4)  # the person beside it
+        trainer(epochs=6, limit_val_batches=0).fit(model, datamodule=data)
+        tuned = torch.cat([o["flow"] for o in trainer().predict(model, datamodule=data)])
+        beside = body & ~model.sketch_masks & person_region(model.sketch_masks, 4)  # the person beside it
         errors[gap] = float((tuned - wide.gt.flow.float()).norm(dim=1)[beside].mean())
     assert errors[2.0] < 0.9 * errors[0.0], errors  # measured: 2.09 against 2.54 px

@@ -16,6 +16,7 @@ from lit_boot.bootstrap import runner as runner_module
 from lit_boot.bootstrap.decisions import DECISION_COLOURS, decision_image, load_decisions
 from lit_boot.bootstrap.selfcheck import (blend_weights, changed_box, choose_pixels, choose_regions, region_labels,
                                          region_names, self_check)
+from lit_boot.flow import person_region
 from lit_boot.flow.evidence import photometric_error
 
 TILE = 32
@@ -122,12 +123,12 @@ def test_a_run_outputs_the_checked_flows(shared, scene, tmp_path, monkeypatch):
     monkeypatch.setattr(runner_module, "predict_flows", designed)
     boot = Bootstrap(scene, tmp_path / "run", **fast_run(shared))
     result = boot.run()
-    person = boot.models[0].person_region(boot.models[0].sketch_masks)
+    person = person_region(boot.models[0].sketch_masks)
     check = json.loads((tmp_path / "run/stages/flow_1/stage.json").read_text())["info"]["self_check"]
     for pair in check["per_pair"]:
         assert not {"tile_0_1", "tile_0_2", "tile_1_1", "tile_1_2"} & set(pair["tuned"])
         assert {name for name in ("tile_0_0", "tile_1_0") if name in pair["regions"]} <= set(pair["tuned"])
-    far = ~boot.models[0].person_region(person, margin=4)  # beyond the blend around the person region
+    far = ~person_region(person, margin=4)  # beyond the blend around the person region
     right, left = far.clone(), far.clone()
     right[..., : TILE + 4] = False
     left[..., TILE - 4 :] = False

@@ -48,7 +48,7 @@ from ..data import load_scene
 from ..data.atomic import atomic_write_bytes
 from ..finite import NonFiniteError
 from ..data.flows import read_flows, write_flows_npz
-from ..flow import FlowTTT
+from ..flow import FlowTTT, person_region
 from ..metrics import scene_flow_metrics, scene_pose_metrics
 from ..pose import REFINERS, PoseResult, load_pose_result
 from .config import BootstrapConfig
@@ -201,7 +201,7 @@ class Bootstrap:
                                           cfg.progress_bar))  # fmt: skip
             flows.append(predict_flows(model, st.scene, st.accelerator, st.precision))
         mean = torch.stack(flows).mean(0)
-        person = self.models[0].person_region(self.models[0].sketch_masks)
+        person = person_region(self.models[0].sketch_masks)
         mean, check, kept = check_stage(cfg, st.scene, st.initial, mean, person)
         record = {**scene_flow_metrics(st.scene.gt, mean), "drift_px": drift(mean, st.initial, person),
                   "agreement_px": agreement(mean, *st.scene.pose_points(cfg.mode)),

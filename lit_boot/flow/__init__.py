@@ -1,6 +1,7 @@
 """The flow half of the method (paper 3.1): RAFT models and weights, the pose-sketched target
 flow, and FlowTTT, which fine-tunes RAFT per scene on it. Never imports lit_boot.pose."""
 
+from .crops import PERSON_MARGIN, person_region
 from .data import POSE_SOURCES, SceneFlowData, ScenePairs, SketchInputs, sketch_inputs
 from .evidence import (
     Evidence,
@@ -14,13 +15,17 @@ from .evidence import (
     warp,
 )
 from .gate import GATE_REPORT_KEYS, gate_sketch
+from .losses import LOSSES, SketchLoss
 from .module import FlowTTT
 from .raft import load_raft, pad_to_multiple, predict_flow, prepare_pair
 from .sketch import FOOTPRINTS, GATE_LEVELS, GATES, SketchConfig, SketchResult, footprint_offsets, sketch_flow, sketch_from_layout, target_flow
+from .warm import FeatureCache, WarmStart
 from .weights import checkpoint_dirs, convert_original_state_dict, load_state_dict_file, resolve_weights
 from .writer import FlowWriter
 
 __all__ = [
+    "PERSON_MARGIN",
+    "person_region",
     "POSE_SOURCES",
     "SceneFlowData",
     "ScenePairs",
@@ -37,6 +42,8 @@ __all__ = [
     "warp",
     "GATE_REPORT_KEYS",
     "gate_sketch",
+    "LOSSES",
+    "SketchLoss",
     "FlowTTT",
     "load_raft",
     "pad_to_multiple",
@@ -51,6 +58,8 @@ __all__ = [
     "sketch_flow",
     "sketch_from_layout",
     "target_flow",
+    "FeatureCache",
+    "WarmStart",
     "checkpoint_dirs",
     "convert_original_state_dict",
     "load_state_dict_file",

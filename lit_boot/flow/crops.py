@@ -3,7 +3,8 @@ cached feature maps instead: :mod:`lit_boot.flow.warm`).
 
 Each pair trains on the sketch's bounding box plus a margin, and, with a hold weight, on a box of
 the same size elsewhere in the frame whose target is the base flow, which holds the rest of the
-frame in place. Boxes are (y0, y1, x0, x1) px.
+frame in place. Boxes are (y0, y1, x0, x1) px. Also the person region around a sketch
+(:func:`person_region`): the pixels that count as the person without ground truth.
 """
 
 from __future__ import annotations
@@ -11,9 +12,27 @@ from __future__ import annotations
 from typing import Callable
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
-__all__ = ["sketch_box", "anchor_box", "crop_loss"]
+__all__ = ["PERSON_MARGIN", "person_region", "sketch_box", "anchor_box", "crop_loss"]
+
+#: px around the sketch that count as the person (:func:`person_region`).
+PERSON_MARGIN = 16
+
+
+def person_region(masks: Tensor, margin: int = PERSON_MARGIN) -> Tensor:
+    """Sketch masks (B, H, W) bool dilated by a square of ``margin`` px each way: (B, H, W)
+    bool, 'the person' without ground truth (the drift's complement, the self-check's person,
+    the loss's unknown zone)."""
+    if masks.ndim != 3 or masks.dtype != torch.bool:
+        raise ValueError(f"masks: expected (B, H, W) bool, got {tuple(masks.shape)} {masks.dtype}")
+    if margin < 0:
+        raise ValueError(f"margin: expected >= 0 px, got {margin}")
+    r = int(margin)
+    # a flat square's dilation is a separable max filter (kornia's dilation is ~100x slower here)
+    rows = F.max_pool2d(masks[:, None].float(), (1, 2 * r + 1), stride=1, padding=(0, r))
+    return F.max_pool2d(rows, (2 * r + 1, 1), stride=1, padding=(r, 0))[:, 0] > 0
 
 
 def sketch_box(mask: Tensor, margin: int) -> tuple[int, int, int, int] | None:
@@ -41,7 +60,7 @@ def anchor_box(box: tuple[int, int, int, int], H: int, W: int) -> tuple[int, int
 
 
 def crop_loss(step: Callable[[Tensor, Tensor, Tensor, Tensor], Tensor], image1: Tensor, image2: Tensor,
-              target: Tensor, weight: Tensor, mask: Tensor, margin: int, hold_weight: float) -> Tensor:  # fmt: skip
+              target: Tensor, weight: Tensor, mask: Tensor, *, margin: int, hold_weight: float) -> Tensor:  # fmt: skip
     """Mean over the batch of ``step(image1, image2, target, weight)`` on each pair's sketch box
     (the whole frame when nothing is painted), plus ``hold_weight`` x the same on its anchor box.
     Inputs (B, C, H, W) / (B, H, W); ``step`` takes one pair's crops with a batch dim on the

@@ -11,6 +11,9 @@ the same box and pastes the result into the untuned flow (:func:`paste`, FlowTTT
 outside the box the output *is* the untuned flow, so the fine-tune cannot move the flow where
 the target taught nothing. (Or, ``paste_crop=False``, on the whole frame from the untuned flow.)
 
+:class:`WarmStart` is FlowTTT's side of it: it owns the cache, each pair's box and the untuned
+weights, and gives a training step's loss and a prediction.
+
 Coordinates: boxes are (y0, y1, x0, x1) in cells of the padded 1/8-resolution grid; pixel
 regions are (y0, y1, x0, x1) in px of the unpadded frame.
 """
@@ -18,6 +21,7 @@ regions are (y0, y1, x0, x1) in px of the unpadded frame.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import torch
 from torch import Tensor
@@ -25,10 +29,12 @@ from torchvision.models.optical_flow import RAFT
 
 from .raft import context_state, encode_frames, pad_to_multiple, run_updates, to_unit_range, unpad
 
-__all__ = ["FeatureCache", "MIN_CELLS", "crop_box", "box_region", "paste"]
+__all__ = ["FeatureCache", "WarmStart", "MIN_CELLS", "TUNED_PARTS", "crop_box", "box_region", "paste"]
 
 #: The smallest side of a box, in cells: torchvision's correlation pyramid needs 16 (128 px).
 MIN_CELLS = 16
+#: The parts of RAFT a warm start tunes (the encoders stay frozen: their outputs are cached).
+TUNED_PARTS = ("update_block.", "mask_predictor.")
 
 
 @dataclass
@@ -165,3 +171,112 @@ def paste(base: Tensor, flow: Tensor, box: tuple[int, int, int, int], pad: tuple
     out = base.clone()
     out[:, fy0:fy1, fx0:fx1] = flow[0, :, by0:by1, bx0:bx1].to(out)
     return out
+
+
+Box = tuple[int, int, int, int]
+
+
+class WarmStart:
+    """FlowTTT's fast fine-tune on one scene at a time: the :class:`FeatureCache` (built with the
+    untuned weights), each pair's crop box (:func:`crop_box`) and the untuned weights of
+    :data:`TUNED_PARTS`.
+
+    Args:
+        raft: the network, held (not copied): its tuned parts are what training changes.
+        loss: a step's loss, (flows list of (1, 2, h, w) px, target (1, 2, h, w) px, weight
+            (1, h, w)) -> scalar (FlowTTT's :class:`~lit_boot.flow.losses.SketchLoss`).
+        train_updates: iterations from the untuned flow per training step and tuned prediction.
+        grad_updates: backpropagate through the last this many (None: all).
+        predict_updates: iterations from zero of the untuned flow (the cache's base flow).
+        crop_margin: px around the sketch of a pair's box (None: the whole grid).
+        paste_crop: predict on the box only and paste it into the untuned flow (else the whole
+            frame from the untuned flow).
+    """
+
+    def __init__(self, raft: RAFT, loss: Callable[[list[Tensor], Tensor, Tensor], Tensor], *, train_updates: int,
+                 grad_updates: int | None, predict_updates: int, crop_margin: int | None, paste_crop: bool):  # fmt: skip
+        self.raft, self.loss_fn = raft, loss
+        self.train_updates, self.grad_updates, self.predict_updates = train_updates, grad_updates, predict_updates
+        self.crop_margin, self.paste_crop = crop_margin, paste_crop
+        self.untuned = self.trainable_state()  # the weights the network had when the warm start was made
+        self.cache: FeatureCache | None = None
+        self.boxes: list[Box | None] | None = None  # the fit's boxes, per pair (None: nothing painted there)
+        self.active = False  # this predict / validation run predicts from the cache (see begin)
+        self.tuned = False  # ... with the tuned iterations (else: the cache's base flow)
+
+    def trainable_state(self) -> dict[str, Tensor]:
+        """A copy of the network's :data:`TUNED_PARTS` weights."""
+        return {k: v.detach().clone() for k, v in self.raft.state_dict().items() if k.startswith(TUNED_PARTS)}
+
+    def is_untuned(self) -> bool:
+        """Whether the network's tuned parts hold the untuned weights."""
+        state = self.raft.state_dict()
+        return all(torch.equal(state[k], v.to(state[k].device)) for k, v in self.untuned.items())
+
+    def build(self, frames: Tensor) -> FeatureCache:
+        """The cache of ``frames`` (T, 3, H, W), built with the untuned weights (and the network's
+        own restored after) unless the one held fits; a new cache drops the boxes."""
+        if self.cache is None or not self.cache.fits(frames):
+            self.boxes = None  # the boxes were the previous frames'
+            tuned = self.trainable_state()
+            self.raft.load_state_dict(self.untuned, strict=False)
+            try:
+                self.cache = FeatureCache.build(self.raft, frames, self.predict_updates)
+            finally:
+                self.raft.load_state_dict(tuned, strict=False)
+        return self.cache
+
+    def fit(self, frames: Tensor, masks: Tensor, targets: Tensor) -> FeatureCache:
+        """Ready a fit on ``frames``: the cache, and each pair's box around its sketch mask
+        ``masks`` (P, H, W) bool and where its target ``targets`` (P, 2, H, W) px moves them (with
+        a margin, a pair with nothing painted has no box: its flow stays the untuned one)."""
+        cache = self.build(frames)
+        self.boxes = [crop_box(m, self.crop_margin, cache.pad, cache.cells, t)
+                      for m, t in zip(masks.cpu(), targets.cpu())]  # fmt: skip
+        return cache
+
+    def begin(self, frames: Tensor | None) -> None:
+        """Start a predict or validation run on ``frames`` (None: not known, the run predicts
+        from zero instead): build the cache if it does not fit, and predict its base flow (RAFT's
+        own) while the network is untuned, else the tuned iterations from it."""
+        self.active = frames is not None
+        if self.active:
+            self.build(frames)
+            self.tuned = not self.is_untuned()
+
+    def _boxes(self, index: Tensor, grad: bool) -> list[Box | None]:
+        """Each pair's box: its crop in training; in prediction too with ``paste_crop`` (after a
+        fit on these frames), else the whole frame."""
+        if grad or (self.paste_crop and self.boxes is not None):
+            return [self.boxes[i] for i in index.tolist()]
+        return [self.cache.whole] * len(index)
+
+    def _flows(self, index: Tensor, grad: bool) -> list[list[Tensor] | None]:
+        """Per pair of ``index``: the last iterations' flows on its box (None: no box)."""
+        grad_updates = self.grad_updates if grad else 1
+        return [None if box is None else self.cache.flows(self.raft, int(i), box, self.train_updates, grad_updates)
+                for i, box in zip(index.tolist(), self._boxes(index, grad))]  # fmt: skip
+
+    def loss(self, index: Tensor, target: Tensor, weight: Tensor) -> Tensor | None:
+        """A training step's loss on pairs ``index`` (B,) against ``target`` (B, 2, H, W) px with
+        ``weight`` (B, H, W): the mean over the pairs with a box of the loss on the box (None if
+        none has one)."""
+        losses = []
+        for b, flows in enumerate(self._flows(index, grad=True)):
+            if flows is not None:
+                (fy0, fy1, fx0, fx1), (by0, by1, bx0, bx1) = box_region(self.boxes[int(index[b])], self.cache.pad,
+                                                                        target.shape[-2:])  # fmt: skip
+                region = [f[..., by0:by1, bx0:bx1] for f in flows]
+                losses.append(self.loss_fn(region, target[b : b + 1, :, fy0:fy1, fx0:fx1],
+                                           weight[b : b + 1, fy0:fy1, fx0:fx1]))  # fmt: skip
+        return sum(losses) / len(losses) if losses else None
+
+    def predict(self, index: Tensor) -> Tensor:
+        """The flows (B, 2, H, W) px on the CPU of pairs ``index`` (B,) of the run's frames (see
+        :meth:`begin`): the untuned flow, with the tuned iterations' flow pasted on each box."""
+        base = self.cache.base
+        if not self.tuned:
+            return base[index]
+        out = [base[i] if flows is None else paste(base[i], flows[-1].float().cpu(), box, self.cache.pad)
+               for i, flows, box in zip(index.tolist(), self._flows(index, grad=False), self._boxes(index, grad=False))]  # fmt: skip
+        return torch.stack(out)
