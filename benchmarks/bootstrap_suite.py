@@ -9,7 +9,7 @@ Usage:
   python benchmarks/bootstrap_suite.py [--presets default,paper] [--scenes 0,1,...]
       [--frames 12] [--height 128] [--width 256] [--weights ../shared/checkpoints/raft-small.pth]
       [--epochs 8] [--flow '{"sketch_weight": 10}'] [--mode 3d|2d] [--self-check off|photometric (default: the preset's)] [--gate] [--detector realistic|accurate]
-      [--config '{"self_check_margin": 0}'] [--out /tmp/bootstrap_suite] [--json out.json]
+      [--config '{"self_check": {"margin": 0}}'] [--out /tmp/bootstrap_suite] [--json out.json]
 
 ``--mode 2d`` runs the 2D-only method on the DCPose-like keypoints (pose metric: kp2d_px);
 ``--self-check photometric`` turns the flow stages' self-check on; ``--gate`` makes the targets
@@ -72,7 +72,8 @@ def main() -> None:
     p.add_argument("--self-check", default=None, choices=("off", "photometric"), help="default: the preset's")
     p.add_argument("--gate", action="store_true", help="targets with the evidence gate (GATE)")
     p.add_argument("--detector", default="realistic", choices=("realistic", "accurate"))
-    p.add_argument("--config", default="{}", help="more BootstrapConfig options, JSON (e.g. '{\"self_check_margin\": 0}')")
+    p.add_argument("--config", default="{}",
+                   help="more BootstrapConfig options, JSON (e.g. '{\"self_check\": {\"margin\": 0}}')")  # fmt: skip
     p.add_argument("--out", default="/tmp/bootstrap_suite")
     p.add_argument("--json", default=None)
     args = p.parse_args()
@@ -86,9 +87,10 @@ def main() -> None:
             out = Path(args.out) / f"{name}_{preset}"
             shutil.rmtree(out, ignore_errors=True)
             flow = {"weights": args.weights, **({"sketch": GATE} if args.gate else {}), **json.loads(args.flow)}
+            config = json.loads(args.config)
+            check = {**config.pop("self_check", {}), **({"method": args.self_check} if args.self_check else {})}
             result = bootstrap(scene, out, preset=preset, mode=args.mode, flow=flow, flow_epochs=args.epochs,
-                               self_check=args.self_check, progress_bar=False, video=False,
-                               **json.loads(args.config))  # fmt: skip
+                               self_check=check, progress_bar=False, video=False, **config)  # fmt: skip
             by_stage = {r["stage"]: r for r in result.history}
             row = {"scene": name, "preset": preset, "speed": speed_summary(result),
                    "stages": {k: {m: v for m, v in r.items() if isinstance(v, float)} for k, r in by_stage.items()}}  # fmt: skip

@@ -41,7 +41,7 @@ from bootstrap_suite import GATE, SCENES, SHARED  # noqa: E402
 
 from lit_boot.bootstrap import Bootstrap  # noqa: E402
 from lit_boot.metrics import scene_flow_metrics  # noqa: E402
-from lit_boot.bootstrap.selfcheck import region_labels, region_names, self_check  # noqa: E402
+from lit_boot.bootstrap.selfcheck import SelfCheckConfig, region_labels, region_names, self_check  # noqa: E402
 from lit_boot.flow import person_region  # noqa: E402
 from lit_boot.synth import make_scene  # noqa: E402
 
@@ -92,7 +92,7 @@ def run_scene(name: str, scene, mode: str, epochs: int, args) -> dict:
     shutil.rmtree(out, ignore_errors=True)
     flow = {"weights": args.weights, **({"sketch": GATE} if args.gate else {}), **json.loads(args.flow)}
     boot = Bootstrap(scene, out, mode=mode, flow=flow, flow_epochs=epochs, cycles=0, video=False, progress_bar=False,
-                     self_check="off", seed=args.seed)  # fmt: skip
+                     self_check={"method": "off"}, seed=args.seed)  # fmt: skip
     start = time.perf_counter()
     result = boot.run()
     print(f"{name}: flow_1 in {time.perf_counter() - start:.0f} s", flush=True)
@@ -128,8 +128,8 @@ def report(runs: dict, args) -> None:
         m_i, m_t = scene_flow_metrics(scene.gt, initial), scene_flow_metrics(scene.gt, tuned)
         for margin in [float(s) for s in args.margins.split(",")]:
             for window in [int(s) for s in args.windows.split(",")]:
-                checked, record, weight = self_check(scene.frames, initial, tuned, person, margin, args.tile,
-                                                     args.blend, window, own=bool(args.own))  # fmt: skip
+                config = SelfCheckConfig(margin=margin, tile=args.tile, blend=args.blend, window=window, own=bool(args.own))
+                checked, record, weight = self_check(scene.frames, initial, tuned, person, config=config)
                 metrics = (m_i, m_t, scene_flow_metrics(scene.gt, checked))
                 counts = agreement(scene, initial, tuned, person, record, weight, args.tie)
                 tot = totals.setdefault((group, margin, window), {"person": [0] * 4, "background": [0] * 4, "rel": []})

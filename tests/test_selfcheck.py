@@ -12,6 +12,7 @@ import torch
 
 import lit_boot
 from lit_boot.bootstrap import Bootstrap, BootstrapConfig, bootstrap
+from lit_boot.bootstrap.config import SelfCheckConfig
 from lit_boot.bootstrap import runner as runner_module
 from lit_boot.bootstrap.decisions import DECISION_COLOURS, decision_image, load_decisions
 from lit_boot.bootstrap.selfcheck import (blend_weights, changed_box, choose_pixels, choose_regions, region_labels,
@@ -24,8 +25,8 @@ TILE = 32
 
 def fast_run(shared, **options):
     flow = {"weights": str(shared / "checkpoints/raft-small.pth"), "train_updates": 2, "predict_updates": 3}
-    return dict(flow=flow, flow_epochs=1, cycles=0, progress_bar=False, video=False, self_check="photometric",
-                self_check_tile=TILE, **options)  # fmt: skip
+    return dict(flow=flow, flow_epochs=1, cycles=0, progress_bar=False, video=False,
+                self_check=SelfCheckConfig(method="photometric", tile=TILE), **options)  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -53,8 +54,8 @@ def test_a_corrupted_tile_gets_the_initial_flow_and_an_exact_region_keeps_the_tu
     bad[32:, 64:] = True  # tile_1_2
     initial = torch.where(bad, gt, gt + 1.5)  # exact in tile_1_2, 1.5 px off elsewhere
     tuned = torch.where(bad, gt + 5.0, gt)  # 5 px off in tile_1_2, exact elsewhere
-    flows, record, _ = self_check(scene.frames, initial, tuned, person, margin=0.02, tile=TILE, blend=2, window=5,
-                                  own=False)  # the box alone decides here (own: see below)
+    config = SelfCheckConfig(margin=0.02, tile=TILE, blend=2, window=5, own=False)  # the box alone decides here (own: below)
+    flows, record, _ = self_check(scene.frames, initial, tuned, person, config=config)
     for pair in record["per_pair"]:
         kept_initial = set(pair["regions"]) - set(pair["tuned"])
         assert kept_initial == {"tile_1_2"}  # the corrupted tile only
@@ -78,11 +79,12 @@ def test_ties_keep_the_initial_flow(scene):
     gt = scene.gt.flow.float()
     person = scene.gt.person_mask[:-1]
     initial = gt + 0.7
-    flows, record, _ = self_check(scene.frames, initial, initial.clone(), person, tile=TILE)
+    flows, record, _ = self_check(scene.frames, initial, initial.clone(), person, config=SelfCheckConfig(tile=TILE))
     assert torch.equal(flows, initial)
     assert record["kept_tuned_fraction"] == 0.0 and record["regions_tuned"] == 0
     # a gain within the margin is a tie too: the tuned flow must be clearly better
-    flows, record, _ = self_check(scene.frames, initial, initial + 1e-3, person, margin=0.02, tile=TILE)
+    flows, record, _ = self_check(scene.frames, initial, initial + 1e-3, person,
+                                  config=SelfCheckConfig(margin=0.02, tile=TILE))
     assert torch.equal(flows, initial)
 
 
@@ -100,11 +102,32 @@ def test_the_blend_is_smooth_and_exact_away_from_borders():
 
 def test_config_checks_the_self_check_options():
     assert BootstrapConfig().checking == "photometric" and BootstrapConfig(preset="paper").checking == "off"
-    assert BootstrapConfig(self_check="off").checking == "off"
-    for bad in ({"self_check": "x"}, {"self_check_margin": 1.0}, {"self_check_tile": 0}, {"self_check_blend": -1},
-                {"self_check_window": 0}):
-        with pytest.raises(ValueError, match="self_check"):
-            BootstrapConfig(**bad)
+    assert BootstrapConfig(self_check=SelfCheckConfig(method="off")).checking == "off"
+    assert BootstrapConfig(self_check={"method": "off", "tile": 16}).self_check == SelfCheckConfig(method="off", tile=16)
+    for bad, message in [({"method": "x"}, "self_check.method: expected one of"),
+                         ({"margin": 1.0}, "self_check.margin: expected 0 <= margin < 1"),
+                         ({"tile": 0}, "self_check.tile: expected >= 1 px"),
+                         ({"blend": -1}, "self_check.blend: expected >= 0 px"),
+                         ({"window": 0}, "self_check.window: expected >= 1 px"),
+                         ({"z": -1.0}, "self_check.z: expected >= 0"),
+                         ({"tiles": 16}, "self_check: unknown key 'tiles'")]:  # fmt: skip
+        with pytest.raises(ValueError, match=message):
+            BootstrapConfig(self_check=bad)
+    with pytest.raises(ValueError, match="self_check: expected a SelfCheckConfig or a dict of its fields"):
+        BootstrapConfig(self_check="off")  # the method is self_check.method
+    with pytest.raises(TypeError):
+        SelfCheckConfig("off")  # keyword-only
+
+
+def test_the_command_line_spells_the_self_check_settings_nested(tmp_path):
+    from lit_boot.cli.console import dataclass_from
+    from lit_boot.cli.runs import bootstrap_parser
+
+    args = bootstrap_parser().parse_args(["--config", "configs/bootstrap.yaml", "--data.scene", str(tmp_path),
+                                          "--self_check.margin", "0.05", "--self_check.method", "off"])  # fmt: skip
+    config = dataclass_from(args, BootstrapConfig)
+    assert config.self_check == SelfCheckConfig(method="off", margin=0.05)
+    assert BootstrapConfig(**config.to_dict()) == config  # a stored config (config.json, a dataset's) reads back
 
 
 @pytest.mark.shared
@@ -196,7 +219,8 @@ def test_the_person_is_judged_pixel_by_pixel_so_the_band_around_it_keeps_the_ini
     initial = gt + torch.tensor([0.5, 0.0]).view(1, 2, 1, 1)
     tuned = torch.where(band[:, None], motion, gt)
     assert (motion - gt).norm(dim=1)[band].mean() > 2  # the band's harm is real
-    flows, record, weight = self_check(scene.frames, initial, tuned, grow(body, 8), tile=TILE, window=3, blend=0)
+    config = SelfCheckConfig(tile=TILE, window=3, blend=0)
+    flows, record, weight = self_check(scene.frames, initial, tuned, grow(body, 8), config=config)
     epe = lambda f, m: float((f - gt).norm(dim=1)[m].mean())  # noqa: E731
     inner = ~grow(~body, 1)  # body pixels 1+ px from its edge
     assert epe(flows, inner) < 0.5 * epe(initial, inner)  # the gain on the body is kept
@@ -227,7 +251,7 @@ def test_only_the_tiles_where_the_flows_differ_are_measured_and_the_decisions_ar
     initial = gt + torch.tensor([0.7, -0.4]).view(1, 2, 1, 1)  # RAFT off everywhere
     tuned = initial.clone()
     tuned[0, :, 20:70, 40:100] = gt[0, :, 20:70, 40:100]  # pair 0: exact in one part; pair 1: unchanged
-    flows, record, weight = self_check(frames, initial, tuned, person, tile=TILE, window=5, blend=1)
+    flows, record, weight = self_check(frames, initial, tuned, person, config=SelfCheckConfig(tile=TILE, window=5, blend=1))
     labels, count = region_labels(person, TILE), 2 * 3 * 5
     choices = []
     for t in range(2):  # the same decisions measured over the whole frame
@@ -235,8 +259,8 @@ def test_only_the_tiles_where_the_flows_differ_are_measured_and_the_decisions_ar
         err_i, valid_i = photometric_error(*pair, initial[t : t + 1])
         err_t, valid_t = photometric_error(*pair, tuned[t : t + 1])
         err_i, err_t, valid = err_i[0], err_t[0], (valid_i & valid_t)[0]
-        won = choose_regions(err_i, err_t, valid & ~person[t], labels[t], count, 0.02, 1.0)[0]
-        on_person = choose_pixels(err_i, err_t, valid, person[t], 5, 0.02, own=True)
+        won = choose_regions(err_i, err_t, valid & ~person[t], labels[t], count, margin=0.02, z=1.0)[0]
+        on_person = choose_pixels(err_i, err_t, valid, person[t], window=5, margin=0.02, own=True)
         choices.append(torch.where(person[t], on_person, won[labels[t]]))
     assert torch.equal(weight, blend_weights(torch.stack(choices), 1))
     assert weight[0].sum() > 0 and not weight[1].any()
@@ -254,20 +278,20 @@ def test_with_own_a_pixel_its_window_favours_still_needs_its_own_error_lower():
     ring[6:18, 6:18] = False
     tuned[ring] = 1.5  # the band beside it: worse, but its 5x5 box holds limb pixels
     every = torch.ones(24, 24, dtype=torch.bool)
-    swayed = choose_pixels(initial, tuned, every, every, 5, 0.02)
-    own = choose_pixels(initial, tuned, every, every, 5, 0.02, own=True)
+    swayed = choose_pixels(initial, tuned, every, every, window=5, margin=0.02)
+    own = choose_pixels(initial, tuned, every, every, window=5, margin=0.02, own=True)
     assert swayed[ring].float().mean() > 0.5  # the window alone gives the band the tuned flow
     assert not own[ring].any()  # its own error says no
     assert own[6:18, 6:18].all()  # the limb keeps it
     flows, record, _ = self_check(torch.zeros(2, 3, 24, 24, dtype=torch.uint8), torch.zeros(1, 2, 24, 24),
-                                  torch.ones(1, 2, 24, 24), every[None], own=True)  # fmt: skip
+                                  torch.ones(1, 2, 24, 24), every[None], config=SelfCheckConfig(own=True))  # fmt: skip
     assert record["own"] is True
 
 
 def test_the_default_preset_frees_the_zone_beside_the_sketch_and_checks_each_pixel_on_its_own_error():
     for mode in ("3d", "2d"):
         config = BootstrapConfig(mode=mode)
-        assert config.self_check_own is True and config.self_check_blend == 0
+        assert config.self_check.own is True and config.self_check.blend == 0
         assert config.flow_kwargs()["sketch_gap"] == 2.0
     assert BootstrapConfig(mode="2d").flow_kwargs()["plateau_delta"] == 0.02
     assert "sketch_gap" not in BootstrapConfig(preset="paper").flow_kwargs()  # the authors hold every pixel

@@ -31,7 +31,7 @@ from typing import Any
 from .options import FlowOptions, PoseOptions, check_options
 
 
-__all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "BootstrapConfig"]
+__all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "SELF_CHECKS", "SelfCheckConfig", "BootstrapConfig"]
 
 MODES = ("3d", "2d")  # lit_boot.core.POSE_MODES, literal here: the CLI reads this module without torch
 DRIFT_GUARDS = ("record", "stop", "rollback")
@@ -73,6 +73,49 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
 
 #: The person height (px) at which the paper's footprint sizes hold (Human3.6M, 1000x1000 frames).
 REFERENCE_PERSON_PX = 450.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class SelfCheckConfig:
+    """The flow stages' self-check against the frames (:mod:`lit_boot.bootstrap.selfcheck`).
+
+    Args:
+        method: None (the preset's: photometric in default, off in paper), off, or photometric
+            (per pair, keep the tuned flow only where its census error is clearly lower than
+            the initial flow's: on the person pixel by pixel, over a small window, elsewhere
+            per tile). The stage's flows are then the checked flows.
+        margin: how much lower (a fraction of the initial flow's error) the tuned flow's error
+            must be to be kept; ties keep the initial flow.
+        tile: background tile size, px.
+        window: the box (px) over which each person pixel's errors are averaged.
+        z: how many standard errors a background tile's gain must clear (noisy evidence, as on
+            blurred frames, keeps the initial flow).
+        blend: px over which the two flows are blended where the choice changes (0: none; a
+            blend gives the tuned flow to pixels beside the person that were judged for the
+            initial flow).
+        own: a person pixel also needs its own error to be lower, not only its window's (else
+            the band of background beside a limb, whose window holds limb pixels, goes with
+            the limb).
+    """
+
+    method: str | None = None
+    margin: float = 0.02
+    tile: int = 32
+    window: int = 5
+    z: float = 1.0
+    blend: int = 0
+    own: bool = True
+
+    def __post_init__(self) -> None:
+        if self.method not in (None, *SELF_CHECKS):
+            raise ValueError(f"self_check.method: expected one of {(None, *SELF_CHECKS)}, got {self.method!r}")
+        if not 0 <= self.margin < 1:
+            raise ValueError(f"self_check.margin: expected 0 <= margin < 1, got {self.margin}")
+        if self.z < 0:
+            raise ValueError(f"self_check.z: expected >= 0 standard errors, got {self.z}")
+        for name, least in (("tile", 1), ("window", 1), ("blend", 0)):
+            if getattr(self, name) < least:
+                raise ValueError(f"self_check.{name}: expected >= {least} px, got {getattr(self, name)}")
 
 
 def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
@@ -132,23 +175,9 @@ class BootstrapConfig:
         flow_format: flo (one Middlebury file per pair) or npz for the run's final flows.
         video: write overlay.mp4.
         progress_bar: Lightning's progress bars.
-        self_check: after each flow stage, without ground truth: None (the preset's: photometric
-            in default, off in paper), off, or photometric (per pair,
-            keep the tuned flow only where its census error is clearly lower than the initial
-            flow's: on the person pixel by pixel, over a small window, elsewhere per tile; see
-            :mod:`lit_boot.bootstrap.selfcheck`). The stage's flows are then the checked flows.
-        self_check_margin: how much lower (a fraction of the initial flow's error) the tuned
-            flow's error must be to be kept; ties keep the initial flow.
-        self_check_tile: background tile size, px.
-        self_check_window: the box (px) over which each person pixel's errors are averaged.
-        self_check_z: how many standard errors a background tile's gain must clear (noisy
-            evidence, as on blurred frames, keeps the initial flow).
-        self_check_blend: px over which the two flows are blended where the choice changes (0:
-            none; a blend gives the tuned flow to pixels beside the person that were judged
-            for the initial flow).
-        self_check_own: a person pixel also needs its own error to be lower, not only its
-            window's (else the band of background beside a limb, whose window holds limb
-            pixels, goes with the limb).
+        self_check: after each flow stage, without ground truth: keep the tuned flow only where
+            the frames say it beats the initial flow (:class:`SelfCheckConfig`: ``method``
+            None is the preset's; a dict of its fields is taken too).
         seed: seed_everything before each stage (the same run gives the same result).
     """
 
@@ -171,18 +200,21 @@ class BootstrapConfig:
     flow_format: str = "flo"
     video: bool = True
     progress_bar: bool = True
-    self_check: str | None = None
-    self_check_margin: float = 0.02
-    self_check_tile: int = 32
-    self_check_window: int = 5
-    self_check_z: float = 1.0
-    self_check_blend: int = 0
-    self_check_own: bool = True
+    self_check: SelfCheckConfig = field(default_factory=SelfCheckConfig)
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if isinstance(self.self_check, dict):
+            unknown = sorted(set(self.self_check) - set(SelfCheckConfig.__dataclass_fields__))
+            if unknown:
+                raise ValueError(f"self_check: unknown key {unknown[0]!r}; expected some of "
+                                 f"{list(SelfCheckConfig.__dataclass_fields__)}")
+            self.self_check = SelfCheckConfig(**self.self_check)
+        if not isinstance(self.self_check, SelfCheckConfig):
+            raise ValueError(f"self_check: expected a SelfCheckConfig or a dict of its fields "
+                             f"({', '.join(SelfCheckConfig.__dataclass_fields__)}), got {self.self_check!r}")
         checks = [("mode", MODES), ("preset", tuple(PRESETS)), ("drift_guard", DRIFT_GUARDS),
-                  ("flow_format", ("flo", "npz")), ("self_check", (None, *SELF_CHECKS))]
+                  ("flow_format", ("flo", "npz"))]
         for name, allowed in checks:
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name}: expected one of {allowed}, got {getattr(self, name)!r}")
@@ -196,13 +228,6 @@ class BootstrapConfig:
             raise ValueError(f"flow_epochs: expected >= 1 or None, got {self.flow_epochs}")
         if self.pose_steps < 1:
             raise ValueError(f"pose_steps: expected >= 1, got {self.pose_steps}")
-        if self.self_check_z < 0:
-            raise ValueError(f"self_check_z: expected >= 0 standard errors, got {self.self_check_z}")
-        if not 0 <= self.self_check_margin < 1:
-            raise ValueError(f"self_check_margin: expected 0 <= margin < 1, got {self.self_check_margin}")
-        if self.self_check_tile < 1 or self.self_check_window < 1 or self.self_check_blend < 0:
-            raise ValueError(f"self_check_tile / self_check_window / self_check_blend: expected >= 1 / >= 1 / >= 0 "
-                             f"px, got {self.self_check_tile} / {self.self_check_window} / {self.self_check_blend}")
         if self.drift_tolerance < 0:
             raise ValueError(f"drift_tolerance: expected a fraction >= 0, got {self.drift_tolerance}")
 
@@ -223,8 +248,9 @@ class BootstrapConfig:
 
     @property
     def checking(self) -> str:
-        """The self-check the flow stages use: ``self_check``, or the preset's when None."""
-        return self.self_check if self.self_check is not None else self.option("self_check")
+        """The self-check the flow stages use: ``self_check.method``, or the preset's when None."""
+        method = self.self_check.method
+        return method if method is not None else self.option("self_check")
 
     def flow_kwargs(self, member: int = 0, person_px: float | None = None) -> dict[str, Any]:
         """FlowTTT arguments for ensemble member ``member`` (0: ``flow``), the preset's

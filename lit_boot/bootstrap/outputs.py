@@ -30,6 +30,7 @@ def speed_summary(result: BootstrapResult) -> dict[str, float]:
 
 def write_outputs(
     result: BootstrapResult,
+    *,
     settings: dict[str, Any],
     guard_events: list[dict[str, Any]],
     accelerator: str,

@@ -18,7 +18,8 @@ from ..core.joints import JointLayout, get_layout
 from ..data.visualize import draw_skeleton, flow_image
 from .decisions import decision_image
 
-__all__ = ["overlay_frames", "flow_colour_scale", "video_fps"]
+__all__ = ["overlay_frames", "flow_colour_scale", "video_fps", "change_image", "draw_poses", "resize_image",
+           "clean_flow"]
 
 MOVING_PX = 0.5  # a pixel "moves" when its flow is longer than this (px)
 FLOW_PERCENTILE = 90.0  # of the moving pixels' magnitudes: the flow colour scale
@@ -51,10 +52,10 @@ def flow_colour_scale(magnitudes: list[np.ndarray]) -> float:
     return max(0.01, float(np.percentile(values, 99.0))) if values.size else 1.0
 
 
-def _error_image(change: torch.Tensor, valid: torch.Tensor, scale: float) -> np.ndarray:
-    """EPE change (H, W) px coloured with the diverging RdBu_r map over [-scale, scale]
-    (blue: the refined flow is nearer the GT, white: no change, red: farther); grey where not
-    ``valid``. HWC uint8."""
+def change_image(change: torch.Tensor, valid: torch.Tensor, scale: float) -> np.ndarray:
+    """A change (H, W), after - before (the EPE change, px; a census error change), coloured with
+    the diverging RdBu_r map over [-scale, scale] (blue: lower after, i.e. better; white: no
+    change; red: higher); grey where not ``valid``. HWC uint8."""
     rgb = colormaps["RdBu_r"]((change.numpy() / scale).clip(-1, 1) * 0.5 + 0.5, bytes=True)[..., :3]
     rgb[~valid.numpy()] = _INVALID
     return rgb
@@ -189,13 +190,13 @@ def overlay_frames(
     cols = 2 if gt_flow is None else 3
     scale = min(1.0, max_side / max(2 * H, cols * W))
     h, w = max(1, int(H * scale)), max(1, int(W * scale))
-    resize = functools.partial(_resize, size=(h, w))
-    flows = {"before": _clean(flow_before), "after": _clean(flow_after)}
+    resize = functools.partial(resize_image, size=(h, w))
+    flows = {"before": clean_flow(flow_before), "after": clean_flow(flow_after)}
     valid = torch.ones(T - 1, H, W, dtype=torch.bool) if gt_valid is None else gt_valid.detach().cpu()
     magnitudes = [flows["before"].norm(dim=1).numpy(), flows["after"].norm(dim=1).numpy()]
     errors, error_scale, labels = None, None, list(flow_labels)
     if gt_flow is not None:
-        gt = _clean(gt_flow)
+        gt = clean_flow(gt_flow)
         magnitudes.append(gt.norm(dim=1)[valid].numpy())
         epe, errors, error_scale = _epe_change(flows, gt, valid)
     flow_scale = flow_colour_scale(magnitudes)
@@ -203,7 +204,7 @@ def overlay_frames(
     mosaics = []
     for t in range(T - 1):
         frame = torch.from_numpy(np.ascontiguousarray(resize(frames[t].detach().cpu())))
-        pose = _skeletons(frame.permute(2, 0, 1), joints, t, layout, (w / W, h / H))
+        pose = draw_poses(frame.permute(2, 0, 1), joints, t, layout, (w / W, h / H))
         before_img, after_img = flow_image(torch.stack([flows["before"][t], flows["after"][t]]), flow_scale)
         if gt_flow is not None:
             pair = valid[t]
@@ -219,20 +220,20 @@ def overlay_frames(
             gt_img = flow_image(gt[t], flow_scale).permute(1, 2, 0).numpy().copy()
             gt_img[~valid[t].numpy()] = _INVALID
             top.append(_label(resize(gt_img), "GT flow"))
-            bottom.append(_label(resize(_error_image(errors[t], valid[t], error_scale)), "EPE change"))
+            bottom.append(_label(resize(change_image(errors[t], valid[t], error_scale)), "EPE change"))
         rows = [np.concatenate(top, 1), np.concatenate(bottom, 1)] + ([key] if key is not None else [])
         mosaics.append(torch.from_numpy(np.concatenate(rows, 0)).permute(2, 0, 1))
     return torch.stack(mosaics).contiguous()
 
 
-def _resize(image: torch.Tensor | np.ndarray, size: tuple[int, int]) -> np.ndarray:
+def resize_image(image: torch.Tensor | np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """(3, H, W) tensor or (H, W, 3) array -> (h, w, 3) array (INTER_AREA; as is when the size agrees)."""
     array = image.permute(1, 2, 0).numpy() if isinstance(image, torch.Tensor) else image
     h, w = size
     return array if array.shape[:2] == (h, w) else cv2.resize(array, (w, h), interpolation=cv2.INTER_AREA)
 
 
-def _clean(flow: torch.Tensor) -> torch.Tensor:
+def clean_flow(flow: torch.Tensor) -> torch.Tensor:
     """The flow as a float CPU tensor with NaN and inf set to 0."""
     return torch.nan_to_num(flow.detach().cpu().float(), 0.0, 0.0, 0.0)
 
@@ -248,7 +249,7 @@ def _epe_change(flows: dict, gt: torch.Tensor, valid: torch.Tensor) -> tuple[dic
     return epe, change, max(0.01, float(np.percentile(_sample(change[valid].abs().numpy()), ERROR_PERCENTILE)))
 
 
-def _skeletons(frame: torch.Tensor, joints: dict, t: int, layout: JointLayout | None, scale: tuple) -> torch.Tensor:
+def draw_poses(frame: torch.Tensor, joints: dict, t: int, layout: JointLayout | None, scale: tuple) -> torch.Tensor:
     """``frame`` (3, h, w) with pair t's skeletons: before in red, after in green (on top);
     joints are scaled by ``scale`` (sx, sy) about pixel centres."""
     for j, colour in zip(joints.values(), ("red", "lime")):

@@ -22,7 +22,8 @@ from matplotlib.figure import Figure
 from ..data.atomic import atomic_file, atomic_write_bytes
 from .overlay import overlay_frames, video_fps
 
-__all__ = ["before_after", "metrics_table", "overlay_frames", "plot_history", "video_fps", "write_video"]
+__all__ = ["before_after", "metric_meaning", "metric_rows", "metrics_table", "overlay_frames", "plot_history",
+           "video_fps", "write_video"]
 
 _NOT_METRICS = ("stage", "kind", "cycle")
 _UNITS = (("_mm_per_frame2", "mm/frame²"), ("_px", "px"), ("_mm", "mm"), ("_error", "of 48"))
@@ -96,6 +97,28 @@ def _change(metric: str, a: float, b: float) -> str:
     if metric in NEUTRAL_METRICS:
         return change
     return f"{change} better" if b < a else f"{change} **worse**"
+
+
+def metric_meaning(metric: str) -> str:
+    """The :data:`METRIC_LEGEND` line of ``metric``'s family ("" if unknown)."""
+    return next((text for names, text in METRIC_LEGEND if metric in names), "")
+
+
+def metric_rows(history: Sequence[dict]) -> list[dict]:
+    """One dict per metric of :func:`before_after`: ``metric``, ``unit``, ``before``, ``after``,
+    ``change_pct`` (after vs before, %; None when before is 0 or a value is not finite),
+    ``better`` ("lower", or "neither" for :data:`NEUTRAL_METRICS`), ``verdict`` ("better",
+    "worse", "unchanged", "" for a neutral or non-finite one) and ``meaning`` (its legend line)."""
+    rows = []
+    for metric, (a, b) in before_after(history).items():
+        finite = math.isfinite(a) and math.isfinite(b)
+        neutral = metric in NEUTRAL_METRICS
+        verdict = "" if neutral or not finite else "unchanged" if a == b else "better" if b < a else "worse"
+        rows.append({"metric": metric, "unit": _unit(metric), "before": a, "after": b,
+                     "change_pct": 100 * (b - a) / abs(a) if finite and a else None,
+                     "better": "neither" if neutral else "lower", "verdict": verdict,
+                     "meaning": metric_meaning(metric)})  # fmt: skip
+    return rows
 
 
 def metrics_table(history: Sequence[dict]) -> str:

@@ -14,7 +14,7 @@ from ..pose import PoseResult
 __all__ = ["BootstrapResult"]
 
 
-@dataclass
+@dataclass(kw_only=True)
 class BootstrapResult:
     """What a run gives: the refined scene (its estimates replaced by the refined poses), the
     initial and final flows (T-1, 2, H, W) px, the final PoseResult (None without a pose

@@ -197,9 +197,9 @@ class Bootstrap:
         for m in range(n):
             model = self._model(m, st.person_px, fresh=cfg.restart_flow)
             loggers = self._loggers(name + (f"_m{m}" if n > 1 else ""))
-            reports.append(fine_tune_flow(model, st.scene, cfg.mode, cfg.epochs, st.accelerator, st.precision, loggers,
-                                          cfg.progress_bar))  # fmt: skip
-            flows.append(predict_flows(model, st.scene, st.accelerator, st.precision))
+            reports.append(fine_tune_flow(model, st.scene, mode=cfg.mode, epochs=cfg.epochs, accelerator=st.accelerator,
+                                          precision=st.precision, loggers=loggers, progress_bar=cfg.progress_bar))
+            flows.append(predict_flows(model, st.scene, accelerator=st.accelerator, precision=st.precision))
         mean = torch.stack(flows).mean(0)
         person = person_region(self.models[0].sketch_masks)
         mean, check, kept = check_stage(cfg, st.scene, st.initial, mean, person)
@@ -223,8 +223,9 @@ class Bootstrap:
         cfg = self.config
         what = f"{REFINERS[cfg.mode].__name__}, {cfg.pose_steps} steps on {cfg.pose_accelerator}"
         log.info(stage_header(index, len(cfg.stages()), name, what))
-        result = refine_poses_stage(st.scene, st.flows, cfg.mode, cfg.pose_kwargs(), cfg.pose_steps, cfg.early_stop,
-                                    cfg.pose_accelerator, self._loggers(name), cfg.progress_bar)  # fmt: skip
+        result = refine_poses_stage(st.scene, st.flows, mode=cfg.mode, kwargs=cfg.pose_kwargs(), steps=cfg.pose_steps,
+                                    early_stop=cfg.early_stop, accelerator=cfg.pose_accelerator,
+                                    loggers=self._loggers(name), progress_bar=cfg.progress_bar)  # fmt: skip
         refined = result.apply_to(st.scene)
         points = refined.pose_points(cfg.mode)
         record = {**scene_pose_metrics(refined, cfg.mode), "agreement_px": agreement(st.flows, *points),
@@ -245,8 +246,8 @@ class Bootstrap:
             log.info(stage_header(0, len(cfg.stages()), "initial", f"RAFT inference x{n} on {st.accelerator}"))
             start = time.perf_counter()
             try:
-                flows = [predict_flows(self._model(m, st.person_px), st.scene, st.accelerator, st.precision)
-                         for m in range(n)]  # fmt: skip
+                flows = [predict_flows(self._model(m, st.person_px), st.scene, accelerator=st.accelerator,
+                                       precision=st.precision) for m in range(n)]  # fmt: skip
             except NonFiniteError as err:
                 raise NonFiniteError(f"{self.out}: pretrained RAFT's flow is not finite at precision {st.precision} "
                                      "(try precision 32-true)", err.fault) from None  # fmt: skip
@@ -377,9 +378,11 @@ class Bootstrap:
         for logger in st.loggers:
             logger.save()
         guard_events = [{"stage": r["stage"], **r["guard"]} for r in st.history if "guard" in r]
-        out = BootstrapResult(self.out, st.scene, st.initial_scene, st.initial, st.flows, st.result, st.history,
-                              st.seconds, st.decisions)
-        write_outputs(out, self._settings(), guard_events, st.accelerator, st.precision, self.config)
+        out = BootstrapResult(run_dir=self.out, scene=st.scene, initial_scene=st.initial_scene,
+                              initial_flows=st.initial, flows=st.flows, poses=st.result, history=st.history,
+                              seconds=st.seconds, decisions=st.decisions)  # fmt: skip
+        write_outputs(out, settings=self._settings(), guard_events=guard_events, accelerator=st.accelerator,
+                      precision=st.precision, config=self.config)  # fmt: skip
         return out
 
 

@@ -41,10 +41,11 @@ import kornia
 import torch
 from torch import Tensor
 
+from ..core import Scene
 from ..flow.evidence import photometric_error
-from .config import SELF_CHECKS
+from .config import SELF_CHECKS, BootstrapConfig, SelfCheckConfig
 
-__all__ = ["SELF_CHECKS", "region_labels", "region_names", "choose_regions", "choose_pixels", "blend_weights", "changed_box",
+__all__ = ["SELF_CHECKS", "SelfCheckConfig", "region_labels", "region_names", "choose_regions", "choose_pixels", "blend_weights", "changed_box",
            "self_check", "check_stage", "summary_line"]
 
 #: Regions with fewer valid pixels than this keep the initial flow (too little evidence).
@@ -91,7 +92,7 @@ def _region_means(error: Tensor, valid: Tensor, labels: Tensor, count: int) -> t
 
 
 def choose_regions(
-    error_initial: Tensor, error_tuned: Tensor, valid: Tensor, labels: Tensor, count: int, margin: float,
+    error_initial: Tensor, error_tuned: Tensor, valid: Tensor, labels: Tensor, count: int, *, margin: float,
     z: float = 1.0,
 ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     """Which regions of one pair take the tuned flow.
@@ -113,7 +114,7 @@ def choose_regions(
     return tuned, mean_initial, mean_tuned, pixels
 
 
-def choose_pixels(error_initial: Tensor, error_tuned: Tensor, valid: Tensor, select: Tensor, window: int,
+def choose_pixels(error_initial: Tensor, error_tuned: Tensor, valid: Tensor, select: Tensor, *, window: int,
                   margin: float, own: bool = False) -> Tensor:
     """Which ``select``-ed pixels of one pair take the tuned flow: (H, W) bool.
 
@@ -168,16 +169,13 @@ def self_check(
     initial: Tensor,
     tuned: Tensor,
     person: Tensor,
-    margin: float = 0.02,
-    tile: int = 32,
-    blend: int = 0,
-    window: int = 5,
-    z: float = 1.0,
-    own: bool = True,
+    *,
+    config: SelfCheckConfig = SelfCheckConfig(),
 ) -> tuple[Tensor, dict[str, Any], Tensor]:
     """The checked flows, the record of every decision and the weight map of the tuned flow.
 
-    frames: (T, 3, H, W) uint8; initial, tuned: (T-1, 2, H, W) px; person: (T-1, H, W) bool.
+    frames: (T, 3, H, W) uint8; initial, tuned: (T-1, 2, H, W) px; person: (T-1, H, W) bool;
+    config: the rule's settings (its ``method`` is not read: this is the photometric check).
     Returns (flows (T-1, 2, H, W) px: the initial flow blended with the tuned flow where it won,
     record, weight (T-1, H, W) float in [0, 1]: the tuned flow's share per pixel). The record:
     ``kept_tuned_fraction`` (mean weight of the tuned flow over all pixels),
@@ -189,6 +187,7 @@ def self_check(
     tuned]. Only the tiles around where the two flows differ are judged (:func:`changed_box`);
     elsewhere they are the same flow.
     """
+    margin, tile, window, z, blend, own = config.margin, config.tile, config.window, config.z, config.blend, config.own
     height, width = initial.shape[-2:]
     labels = region_labels(person, tile)
     names = region_names(height, width, tile)
@@ -207,8 +206,8 @@ def self_check(
         err_t, valid_t = photometric_error(*pair, tuned[t : t + 1].float(), radius=CENSUS_RADIUS, box=box)
         err_i, err_t, valid = err_i[0], err_t[0], (valid_i & valid_t)[0]
         on, there = person[t, y0:y1, x0:x1], labels[t, y0:y1, x0:x1]
-        won, mean_i, mean_t, pixels = choose_regions(err_i, err_t, valid & ~on, there, count, margin, z)
-        on_person = choose_pixels(err_i, err_t, valid, on, window, margin, own)
+        won, mean_i, mean_t, pixels = choose_regions(err_i, err_t, valid & ~on, there, count, margin=margin, z=z)
+        on_person = choose_pixels(err_i, err_t, valid, on, window=window, margin=margin, own=own)
         choice[y0:y1, x0:x1] = torch.where(on, on_person, won[there])
         choices.append(choice)
         judged = valid & on
@@ -237,20 +236,18 @@ def self_check(
 
 
 def check_stage(
-    config: Any, scene: Any, initial: Tensor, tuned: Tensor, person: Tensor
-) -> tuple[Tensor, dict | None, Tensor | None]:
-    """A flow stage's output under ``config.checking`` (a BootstrapConfig): the tuned flows,
-    None and None when off, else the checked flows, the record of :func:`self_check` with the
-    tuned (unchecked) flows' GT metrics as ``tuned_metrics`` (when the scene has GT flow), and
-    the tuned flow's weight map (T-1, H, W)."""
+    config: BootstrapConfig, scene: Scene, initial: Tensor, tuned: Tensor, person: Tensor
+) -> tuple[Tensor, dict[str, Any] | None, Tensor | None]:
+    """A flow stage's output under ``config.checking``: the tuned flows (T-1, 2, H, W) px, None
+    and None when off, else the checked flows, the record of :func:`self_check` (with
+    ``config.self_check``) with the tuned (unchecked) flows' GT metrics as ``tuned_metrics``
+    (when the scene has GT flow), and the tuned flow's weight map (T-1, H, W). ``initial``:
+    (T-1, 2, H, W) px; ``person``: (T-1, H, W) bool."""
     if config.checking == "off":
         return tuned, None, None
     from ..metrics import scene_flow_metrics
 
-    flows, record, weight = self_check(scene.frames, initial, tuned, person, config.self_check_margin,
-                                       config.self_check_tile, config.self_check_blend,
-                                       config.self_check_window, config.self_check_z,
-                                       config.self_check_own)  # fmt: skip
+    flows, record, weight = self_check(scene.frames, initial, tuned, person, config=config.self_check)
     return flows, {**record, "tuned_metrics": scene_flow_metrics(scene.gt, tuned)}, weight
 
 

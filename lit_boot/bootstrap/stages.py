@@ -62,7 +62,7 @@ def _bars(progress_bar: bool) -> list:
     return [TQDMProgressBar()] if progress_bar else []
 
 
-def _flow_trainer(max_epochs: int, accelerator: str, precision: str, loggers: list, progress_bar: bool) -> L.Trainer:
+def _flow_trainer(*, max_epochs: int, accelerator: str, precision: str, loggers: list, progress_bar: bool) -> L.Trainer:
     return L.Trainer(
         max_epochs=max_epochs, accelerator=accelerator, devices=1, precision=precision, logger=loggers or False,
         enable_checkpointing=False, enable_model_summary=False, num_sanity_val_steps=0, limit_val_batches=0,
@@ -71,10 +71,11 @@ def _flow_trainer(max_epochs: int, accelerator: str, precision: str, loggers: li
 
 
 def predict_flows(
-    model: FlowTTT, scene: Scene, accelerator: str, precision: str, progress_bar: bool = False
+    model: FlowTTT, scene: Scene, *, accelerator: str, precision: str, progress_bar: bool = False
 ) -> torch.Tensor:
     """``model``'s flow (T-1, 2, H, W) px for every pair, with its ``predict_updates``."""
-    trainer = _flow_trainer(1, accelerator, precision, [], progress_bar)
+    trainer = _flow_trainer(max_epochs=1, accelerator=accelerator, precision=precision, loggers=[],
+                            progress_bar=progress_bar)  # fmt: skip
     out = trainer.predict(model, datamodule=SceneFlowData(scene, shuffle=False))
     order = torch.cat([o["index"] for o in out]).argsort()
     flows = torch.cat([o["flow"].float().cpu() for o in out])[order]
@@ -85,6 +86,7 @@ def predict_flows(
 def fine_tune_flow(
     model: FlowTTT,
     scene: Scene,
+    *,
     mode: str,
     epochs: int,
     accelerator: str,
@@ -98,7 +100,8 @@ def fine_tune_flow(
     A non-finite value raises NonFiniteError (the model holds the last good step's weights)."""
     model.forget_targets()  # rebuilt from these poses
     data = SceneFlowData(scene, pose_source=SOURCE_OF_MODE[mode])
-    trainer = _flow_trainer(epochs, accelerator, precision, loggers, progress_bar)
+    trainer = _flow_trainer(max_epochs=epochs, accelerator=accelerator, precision=precision, loggers=loggers,
+                            progress_bar=progress_bar)  # fmt: skip
     trainer.fit(model, datamodule=data)
     _raise_fault(trainer, "FlowTTT")
     return {**model.target_report, "train/epochs": float(trainer.current_epoch)}
@@ -107,6 +110,7 @@ def fine_tune_flow(
 def refine_poses_stage(
     scene: Scene,
     flows: torch.Tensor,
+    *,
     mode: str,
     kwargs: dict[str, Any],
     steps: int,

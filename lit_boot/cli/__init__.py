@@ -13,6 +13,8 @@ Commands, one module per group (each imported only when one of its commands runs
   -> flow) on one scene, resumed when rerun; the demo on a small synthetic scene.
 - ``lit-boot bootstrap-many SOURCE PATH [--out DIR] [--engine local|ray --workers N]``
   (:mod:`.dataset`): the method on every scene of a dataset, resumable, with a summary table.
+- ``lit-boot report RUN_DIR [--scene DIR]`` (:mod:`.reporting`): report.html for a finished run
+  folder, or a dataset run's (each scene's, and the page linking them).
 - ``lit-boot fit|validate|predict --config configs/flow_ttt.yaml --data.scene DIR``
   (:mod:`.lightning`): a LightningModule (FlowTTT ...) on one scene through a LightningCLI
   subclass; the run goes to ``runs/<scene>/<model>`` unless ``--trainer.default_root_dir`` says
@@ -68,6 +70,8 @@ COMMANDS: dict[str, Command] = {
     "bootstrap-many": Command("dataset", "bootstrap_many",
                               "run the method on every scene of a dataset (Sintel, 3DPW, H36M, videos); resumable, Ray"),
     "demo": Command("runs", "demo", "make a small synthetic scene, bootstrap it, print EPE and MPJPE before and after"),
+    "report": Command("reporting", "report",
+                      "write report.html for a finished run (or a dataset run): did the video get better, and where"),
     "estimate-pose": Command("importing", "estimate_pose",
                              "MediaPipe Pose on a video: 2D keypoints, 3D joints and cameras to a pose file"),
     "fit": _lightning("train one stage's model (FlowTTT, PoseRefiner, ...) on one scene"),

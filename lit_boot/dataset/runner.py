@@ -9,6 +9,7 @@ The dataset folder::
                           scene's folder holds its stitched poses.npz and flows.npz
     tasks/<name>.json     each task's record, as its worker wrote it; tasks/<name>.log its log
     summary.md, summary.csv   one row per scene and the dataset row (:mod:`.summary`)
+    report.html           the same rows, linking each scene's report.html (:mod:`.html_report`)
     dataset.json          the dataset metrics (merged from the scenes' metric states), counts
     .lock                 one dataset run at a time per folder
 
@@ -38,7 +39,7 @@ from .chunks import plan_chunks
 from .engines import Job, LocalEngine, RayEngine, make_engine
 from .manifest import MANIFEST_JSON, Manifest
 from .stitch import stitch_parent
-from .summary import dataset_metrics, write_summary
+from .summary import dataset_metrics, summary_records, write_summary
 from .tasks import Task
 from .worker import task_files
 
@@ -216,20 +217,15 @@ def _stitch(manifest: Manifest, out: Path, mode: str) -> None:
 
 
 def _finish(manifest: Manifest, out: Path) -> DatasetResult:
-    """Write summary.md, summary.csv and dataset.json; the result."""
-    records = []
-    for name in manifest.names():
-        record = manifest.tasks[name]
-        if record["task"].get("parent"):
-            continue  # a chunk: its scene's row holds the stitched result
-        result = record.get("result") or {}
-        records.append({"name": name, "state": record["state"], "frames": result.get("frames"),
-                        "seconds": result.get("seconds"), "error": record.get("error"),
-                        "states": result.get("states")})  # fmt: skip
+    """Write summary.md, summary.csv, dataset.json and report.html; the result."""
+    records = summary_records(manifest.tasks)
     md, csv = write_summary(out, records)
     metrics = dataset_metrics(records)
     counts = {s: sum(r["state"] == s for r in records) for s in ("done", "failed", "pending", "running")}
     data = {"format": "lit-boot-dataset-metrics", "version": 1, "scenes": counts, "metrics": metrics,
             "written": time.strftime("%Y-%m-%d %H:%M:%S")}  # fmt: skip
     atomic_write_bytes(out / "dataset.json", (json.dumps(data, indent=2) + "\n").encode())
+    from .html_report import write_dataset_report  # imports the scene report's drawing (Lightning, OpenCV)
+
+    write_dataset_report(out, scene_reports=False)  # links the scenes' reports (each run writes its own)
     return DatasetResult(out, records, metrics, counts, md, csv)

@@ -20,10 +20,24 @@ from typing import Any
 from ..data.atomic import atomic_write_bytes
 from ..metrics import METRIC_NAMES, compute_metric_states, merge_metric_states
 
-__all__ = ["dataset_metrics", "summary_rows", "summary_markdown", "summary_csv", "write_summary"]
+__all__ = ["dataset_metrics", "summary_records", "summary_rows", "summary_markdown", "summary_csv", "write_summary"]
 
 Record = dict[str, Any]
 _STAGES = ("initial", "final")
+
+
+def summary_records(tasks: dict[str, dict[str, Any]]) -> list[Record]:
+    """The per-scene records (see the module doc) of a manifest's ``tasks`` ({name: manifest
+    record}), in order; chunks are left out (their scene's record holds the stitched result)."""
+    records = []
+    for name, record in tasks.items():
+        if record["task"].get("parent"):
+            continue
+        result = record.get("result") or {}
+        records.append({"name": name, "state": record["state"], "frames": result.get("frames"),
+                        "seconds": result.get("seconds"), "error": record.get("error"),
+                        "states": result.get("states")})  # fmt: skip
+    return records
 
 
 def _counted(record: Record) -> bool:
