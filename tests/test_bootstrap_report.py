@@ -8,6 +8,8 @@ import pytest
 import torch
 
 from lit_boot.bootstrap import overlay, report
+from lit_boot.bootstrap.metric_history import metric_value, stage_series, unit
+from lit_boot.bootstrap.metrics_plot import MIN_RELATIVE_SPAN, MIN_SPAN, history_figure, y_limits
 from lit_boot.bootstrap.report import overlay_frames, plot_history, write_video
 from lit_boot.data import flow_image, read_png
 from lit_boot.synth import make_scene
@@ -61,16 +63,16 @@ def test_plot_history_without_gt(tmp_path: Path) -> None:
     alone = assert_plot(plot_history(history, tmp_path / "m.png"))
     history[1]["epochs"], history[2]["note"] = 8, "text"  # an int and a string: not metrics
     assert torch.equal(assert_plot(plot_history(history, tmp_path / "m.png")), alone)
-    assert report._metric_value(8) is None and report._metric_value(float("nan")) is None
-    assert report._metric_value(np.float32(2.5)) == 2.5
+    assert metric_value(8) is None and metric_value(float("nan")) is None
+    assert metric_value(np.float32(2.5)) == 2.5
     assert_plot(plot_history(history, tmp_path / "m.png"))
 
 
 def test_plot_history_units() -> None:
-    assert report._unit("agreement_px") == "px"
-    assert report._unit("mpjpe_mm") == "mm"
-    assert report._unit("epe_person") == "px" and report._unit("epe") == "px"
-    assert report._unit("accel_mm_per_frame2") == "mm/frame²"
+    assert unit("agreement_px") == "px"
+    assert unit("mpjpe_mm") == "mm"
+    assert unit("epe_person") == "px" and unit("epe") == "px"
+    assert unit("accel_mm_per_frame2") == "mm/frame²" and unit("photo_error") == "of 48"
 
 
 def test_plot_history_errors(tmp_path: Path) -> None:
@@ -81,6 +83,40 @@ def test_plot_history_errors(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"history\[1\]"):
         plot_history([{"stage": "initial", "epe": 1.0}, {"epe": 2.0}], tmp_path / "m.png")
     assert not any(tmp_path.iterdir())
+
+
+def test_small_changes_are_drawn_small() -> None:
+    def share(values, unit_name):  # of the panel's height the change takes
+        bottom, top = y_limits(values, unit_name)
+        assert bottom <= min(values) and top >= max(values)
+        return (max(values) - min(values)) / (top - bottom)
+
+    assert share([0.0701, 0.0713], "px") < 0.1  # +1.7% on the background: a small step, not a climb
+    assert share([0.0, 0.0002], "px") < 0.05  # drift 0 -> 0.0002 px: flat
+    assert share([70.0, 67.7], "mm") < 0.2 and share([25.5, 27.3], "of 48") < 0.4
+    assert share([3.6, 1.8], "px") > 0.8  # a halving fills the panel
+    assert y_limits([0.0, 0.0002], "px")[0] > -0.001  # errors start at 0: no axis far below it
+    bottom, top = y_limits([5.0], "mm")
+    assert top - bottom >= max(MIN_SPAN["mm"], MIN_RELATIVE_SPAN * 5.0) and bottom < 5.0 < top
+    assert y_limits([float("nan"), 0.5, float("nan")], "px") == y_limits([0.5], "px")
+
+
+def test_no_line_is_drawn_across_a_stage_without_a_value() -> None:
+    series = stage_series(HISTORY)
+    assert np.isnan(series["mpjpe_mm"][1]) and np.isnan(series["mpjpe_mm"][3]) and series["mpjpe_mm"][2] == 53.6
+    assert np.isnan(series["epe"][2]) and np.isnan(series["epe_person"][3])  # None is no value
+    fig = history_figure(HISTORY)
+    axes = {ax.get_title().split(":")[0]: ax for ax in fig.axes}
+    line = axes["mpjpe_mm"].lines[0]
+    assert np.isnan(line.get_ydata()[1]) and list(line.get_xdata()) == [0, 1, 2, 3]  # a gap, not a line 0 -> 2
+    assert axes["mpjpe_mm"].get_title() == "mpjpe_mm: -10.7%, better"
+    assert axes["epe"].get_title() == "epe: -32.0%, better" and "lower is better" in axes["epe"].get_ylabel()
+    assert "Metrics per stage" in fig._suptitle.get_text()
+    worse = history_figure([{"stage": "initial", "epe_background": 0.0701, "drift_px": 0.0},
+                            {"stage": "flow_1", "epe_background": 0.0713, "drift_px": 0.0002}])  # fmt: skip
+    titles = {ax.get_title() for ax in worse.axes}
+    assert titles == {"epe_background: +1.7%, worse", "drift_px: +0.0002 px"}
+    assert {ax.get_ylabel() for ax in worse.axes} == {"px · lower is better", "px · a diagnostic"}
 
 
 # --- overlay_frames ------------------------------------------------------------------------

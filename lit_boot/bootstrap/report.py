@@ -1,5 +1,7 @@
-"""What a bootstrap run shows: the before/after table, a metrics plot per stage, an mp4 video
-of the before/after overlays (made by :mod:`lit_boot.bootstrap.overlay`).
+"""What a bootstrap run shows: the before/after table, a metrics plot per stage
+(:mod:`~lit_boot.bootstrap.metrics_plot`), an mp4 video of the before/after overlays (made by
+:mod:`lit_boot.bootstrap.overlay`). The run's records are read by
+:mod:`~lit_boot.bootstrap.metric_history`.
 
 Images are uint8 tensors (3, H, W) in RGB order. Every file is written atomically (a
 temporary file beside the target, then renamed).
@@ -7,7 +9,6 @@ temporary file beside the target, then renamed).
 
 from __future__ import annotations
 
-import io
 import math
 import os
 from collections.abc import Sequence
@@ -16,92 +17,21 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
-from ..data.atomic import atomic_file, atomic_write_bytes
+from ..data.atomic import atomic_file
+from .metric_history import (METRIC_LEGEND, NEUTRAL_METRICS, before_after, change_text, metric_meaning, unit,
+                             verdict)  # fmt: skip
+from .metrics_plot import plot_history
 from .overlay import overlay_frames, video_fps
 
 __all__ = ["before_after", "metric_meaning", "metric_rows", "metrics_table", "overlay_frames", "plot_history",
-           "video_fps", "write_video"]
-
-_NOT_METRICS = ("stage", "kind", "cycle")
-_UNITS = (("_mm_per_frame2", "mm/frame²"), ("_px", "px"), ("_mm", "mm"), ("_error", "of 48"))
-
-
-def _unit(metric: str) -> str:
-    """Unit from the name: ``*_px`` px, ``*_mm`` mm, ``*_mm_per_frame2`` mm/frame², ``epe*`` px,
-    ``*_error`` "of 48" (a census error)."""
-    for suffix, unit in _UNITS:
-        if metric.endswith(suffix):
-            return unit
-    return "px" if metric.startswith("epe") else ""
-
-
-def _metric_value(value: object) -> float | None:
-    """A finite float (Python or NumPy) as float; anything else (None, NaN, int, text) is None."""
-    if not isinstance(value, (float, np.floating)) or not math.isfinite(value):
-        return None
-    return float(value)
-
-
-#: Metrics that are not better when lower: a diagnostic, shown without "better" / "worse".
-NEUTRAL_METRICS = ("drift_px",)
-
-#: One legend line per metric family (lit_boot.metrics.suite's and lit_boot.bootstrap.evaluate's), in order.
-METRIC_LEGEND = (
-    (("epe", "epe_person", "epe_background", "epe_joints"),
-     "flow end-point error vs the GT flow over valid, non-occluded pixels: all, on / off the GT "
-     "person mask, at the GT joints"),
-    (("mpjpe_mm", "pa_mpjpe_mm"), "3D joint error vs GT, root-aligned / after Procrustes alignment"),
-    (("accel_mm_per_frame2",), "acceleration error vs GT (jitter)"),
-    (("proj2d_px",), "the 3D joints projected by the cameras vs the GT 2D joints"),
-    (("kp2d_px",), "2D keypoint error vs GT"),
-    (("agreement_px",),
-     "flow-pose agreement: the L_opt residual of the current poses under the current flow "
-     "(self-consistency, not accuracy; needs no GT)"),
-    (("photo_error",),
-     "image evidence: census error of frame t against frame t+1 warped by the flow (0..48; needs no GT)"),
-    (("track_error",),
-     "image evidence: census error along the joint tracks from frame t to t+1 (0..48; needs no GT)"),
-    (("drift_px",),
-     "how far the flow outside the person moved from RAFT's (needs no GT; 0 before by definition; "
-     "a diagnostic, neither better nor worse)"),
-)  # fmt: skip
-
-
-def before_after(history: Sequence[dict]) -> dict[str, tuple[float, float]]:
-    """Each metric's value (float) at its first record and at its last, rolled-back stages left
-    out, in order of first appearance; drift_px starts at 0.0 (the initial flow is RAFT's)."""
-    first: dict[str, float] = {}
-    last: dict[str, float] = {}
-    for record in history:
-        if record.get("rolled_back"):
-            continue
-        for k, v in record.items():
-            if isinstance(v, float) and k not in _NOT_METRICS:
-                first.setdefault(k, v)
-                last[k] = v
-    if "drift_px" in first:
-        first["drift_px"] = 0.0
-    return {k: (first[k], last[k]) for k in first}
+           "video_fps", "write_video", "NEUTRAL_METRICS", "METRIC_LEGEND"]
 
 
 def _change(metric: str, a: float, b: float) -> str:
     """``-12.0% better``, ``+3.1% **worse**``, ``unchanged``; in the unit when ``a`` is 0."""
-    if not (math.isfinite(a) and math.isfinite(b)):
-        return ""
-    if b == a:
-        return "unchanged"
-    change = f"{100 * (b - a) / abs(a):+.1f}%" if a else f"{b - a:+.3f} {_unit(metric)}".rstrip()
-    if metric in NEUTRAL_METRICS:
-        return change
-    return f"{change} better" if b < a else f"{change} **worse**"
-
-
-def metric_meaning(metric: str) -> str:
-    """The :data:`METRIC_LEGEND` line of ``metric``'s family ("" if unknown)."""
-    return next((text for names, text in METRIC_LEGEND if metric in names), "")
+    text, word = change_text(metric, a, b), verdict(metric, a, b)
+    return f"{text} **worse**" if word == "worse" else f"{text} better" if word == "better" else text
 
 
 def metric_rows(history: Sequence[dict]) -> list[dict]:
@@ -112,11 +42,9 @@ def metric_rows(history: Sequence[dict]) -> list[dict]:
     rows = []
     for metric, (a, b) in before_after(history).items():
         finite = math.isfinite(a) and math.isfinite(b)
-        neutral = metric in NEUTRAL_METRICS
-        verdict = "" if neutral or not finite else "unchanged" if a == b else "better" if b < a else "worse"
-        rows.append({"metric": metric, "unit": _unit(metric), "before": a, "after": b,
+        rows.append({"metric": metric, "unit": unit(metric), "before": a, "after": b,
                      "change_pct": 100 * (b - a) / abs(a) if finite and a else None,
-                     "better": "neither" if neutral else "lower", "verdict": verdict,
+                     "better": "neither" if metric in NEUTRAL_METRICS else "lower", "verdict": verdict(metric, a, b),
                      "meaning": metric_meaning(metric)})  # fmt: skip
     return rows
 
@@ -127,7 +55,7 @@ def metrics_table(history: Sequence[dict]) -> str:
     :data:`NEUTRAL_METRICS`); then one legend line per metric family present."""
     values = before_after(history)
     rows = ["| metric | unit | before | after | change (lower is better) |", "| --- | --- | --- | --- | --- |"]
-    rows += [f"| {k} | {_unit(k)} | {a:.3f} | {b:.3f} | {_change(k, a, b)} |" for k, (a, b) in values.items()]
+    rows += [f"| {k} | {unit(k)} | {a:.3f} | {b:.3f} | {_change(k, a, b)} |" for k, (a, b) in values.items()]
     worse = [k for k, (a, b) in values.items() if k not in NEUTRAL_METRICS and b > a]
     rows += ["", "Before: the initial stage (pretrained RAFT, the input poses); after: each metric's last "
              f"stage. Lower is better for every metric but {', '.join(NEUTRAL_METRICS)}; "
@@ -135,53 +63,6 @@ def metrics_table(history: Sequence[dict]) -> str:
     rows += [f"- {' / '.join(k for k in names if k in values)}: {text}"
              for names, text in METRIC_LEGEND if any(k in values for k in names)]  # fmt: skip
     return "\n".join(rows)
-
-
-def plot_history(history: Sequence[dict], path: str | os.PathLike) -> Path:
-    """Plot the metrics of a bootstrap run per stage into a PNG at ``path``; returns the path.
-
-    ``history``: records in run order, each a dict with "stage" (the x tick label; the first is
-    usually "initial", the inputs' metrics), optionally "kind" and "cycle", and metrics: every
-    other key with a float value (e.g. "epe", "mpjpe_mm", "agreement_px"; ints are not metrics).
-    A metric that is missing, None or not finite in a record is left out for that record. One
-    subplot per metric (up to 3 per row), in order of first appearance, markers and lines, the
-    y unit from the name's suffix. Rendered with Matplotlib's Agg canvas (pyplot is untouched).
-    Raises ValueError for an empty history, a record without "stage", or no metric at all.
-    """
-    path = Path(path)
-    if not history:
-        raise ValueError(f"plot_history({path}): empty history, nothing to plot")
-    stages: list[str] = []
-    for i, record in enumerate(history):
-        if not isinstance(record, dict) or "stage" not in record:
-            raise ValueError(f"plot_history({path}): history[{i}] is not a dict with a 'stage' key: {record!r}")
-        stages.append(str(record["stage"]))
-    series: dict[str, tuple[list[int], list[float]]] = {}
-    for i, record in enumerate(history):
-        for key, value in record.items():
-            if key not in _NOT_METRICS and (v := _metric_value(value)) is not None:
-                xs, ys = series.setdefault(key, ([], []))
-                xs.append(i)
-                ys.append(v)
-    if not series:
-        raise ValueError(f"plot_history({path}): no metrics in the history (no numeric values besides {_NOT_METRICS})")
-    cols = min(3, len(series))
-    rows = math.ceil(len(series) / cols)
-    width = max(3.6, 0.55 * len(stages) + 1.5)
-    fig = Figure(figsize=(width * cols, 2.9 * rows), dpi=100, layout="constrained")
-    FigureCanvasAgg(fig)
-    for n, (name, (xs, ys)) in enumerate(series.items()):
-        ax = fig.add_subplot(rows, cols, n + 1)
-        ax.plot(xs, ys, marker="o", linestyle="-")
-        ax.set_title(name)
-        ax.set_ylabel(_unit(name))
-        tilt = len(stages) > 3
-        ax.set_xticks(range(len(stages)), stages, rotation=30 if tilt else 0, ha="right" if tilt else "center")
-        ax.set_xlim(-0.5, len(stages) - 0.5)
-        ax.grid(True, alpha=0.3)
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png")
-    return atomic_write_bytes(path, buffer.getvalue())
 
 
 def write_video(frames_uint8: torch.Tensor, path: str | os.PathLike, fps: float) -> Path:

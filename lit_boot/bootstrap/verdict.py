@@ -18,7 +18,7 @@ import torch
 import torch.nn.functional as F
 
 from .pair_maps import CHANGED_PX, PairMaps
-from .report import before_after
+from .metric_history import before_after
 
 __all__ = ["EvidenceTally", "certainty", "evidence_sentence", "gt_sentence", "TILE_PX"]
 
