@@ -20,10 +20,13 @@ from lit_boot.data.readers import PoseEstimates
 from lit_boot.pose import PoseResult
 
 FAST = dict(flow_epochs=1, pose_steps=15, progress_bar=False)
+#: A randomly initialised RAFT-small: for the tests that check the orchestration, not the accuracy.
+RANDOM_RAFT = {"weights": None, "train_updates": 2, "predict_updates": 3}
 
 
 def fast_flow(shared):
-    return {"weights": str(shared / "checkpoints/raft-small.pth"), "train_updates": 2, "predict_updates": 3}
+    """Real RAFT-small weights: for the tests that assert an improvement."""
+    return {**RANDOM_RAFT, "weights": str(shared / "checkpoints/raft-small.pth")}
 
 
 @pytest.fixture(scope="module")
@@ -137,45 +140,53 @@ def test_run_produces_every_output_and_improves_the_pose(shared, tiny_scene, tmp
     assert set(state) == set(lit_boot.flow.load_raft("raft_small", None).state_dict())
 
 
-@pytest.mark.shared
-def test_interrupted_run_resumes_after_the_last_finished_stage(shared, tiny_scene, tmp_path, monkeypatch):
+def test_interrupted_run_resumes_after_the_last_finished_stage(tiny_scene, tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("interrupted")
 
     monkeypatch.setattr(runner_module, "refine_poses_stage", broken)
     with pytest.raises(RuntimeError, match="interrupted"):
-        bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, **FAST)
+        bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, **FAST)
     assert (tmp_path / "run/stages/flow_1/stage.json").is_file()
     assert not (tmp_path / "run/stages/pose_1").exists()
     monkeypatch.undo()
-    calls = []
-    original = runner_module.fine_tune_flow
+    built, starts = [], []  # the weights the resumed run's network is made with, and flow stages start from
+    make, fine_tune = runner_module.make_flow_model, runner_module.fine_tune_flow
 
-    def counting(*args, **kwargs):
-        calls.append(1)
-        return original(*args, **kwargs)
+    def making(kwargs):
+        model = make(kwargs)
+        built.append({k: v.clone() for k, v in model.raft.state_dict().items()})
+        return model
 
+    def counting(model, *args, **kwargs):
+        starts.append({k: v.clone() for k, v in model.raft.state_dict().items()})
+        return fine_tune(model, *args, **kwargs)
+
+    monkeypatch.setattr(runner_module, "make_flow_model", making)
     monkeypatch.setattr(runner_module, "fine_tune_flow", counting)
-    result = bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, **FAST)
-    assert len(calls) == 1  # flow_2 only: flow_1 was loaded
+    result = bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, **FAST)
+    assert len(starts) == 1  # flow_2 only: flow_1 was loaded
+    # ... and flow_2 continues from flow_1's tuned weights (restart_flow false), not from the network as made
+    tuned = torch.load(tmp_path / "run/stages/flow_1/raft_0.pt", weights_only=True)
+    assert not all(torch.equal(built[0][k], v) for k, v in tuned.items())  # flow_1 changed the weights
+    assert all(torch.equal(starts[0][k], v) for k, v in tuned.items())
     assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1", "flow_2"]
     # the summary dashboard holds each stage once, although the first run logged some of them too
     with open(tmp_path / "run/logs/csv/summary/metrics.csv") as f:
         assert [int(row["step"]) for row in csv.DictReader(f)] == [0, 1, 2, 3]
     assert len(list((tmp_path / "run/logs/tensorboard/summary").glob("events.out.tfevents.*"))) == 1
     with pytest.raises(ValueError, match="cycles"):
-        bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, cycles=2, **FAST)
+        bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, cycles=2, **FAST)
 
 
-@pytest.mark.shared
-def test_drift_guard_rolls_back_a_stage_that_worsens_the_image_evidence(shared, tiny_scene, tmp_path, monkeypatch,
-                                                                        caplog, capsys):
+def test_drift_guard_rolls_back_a_stage_that_worsens_the_image_evidence(tiny_scene, tmp_path, monkeypatch, caplog,
+                                                                        capsys):  # fmt: skip
     caplog.set_level(logging.INFO, logger="lit_boot")
     photo = iter([1.0, 0.9])  # initial, flow_1: the flow explains the frames better
     tracks = iter([1.0, 1.2])  # initial, pose_1: the joint tracks 20% worse
     monkeypatch.setattr(runner_module, "photo_error", lambda *a, **k: next(photo))
     monkeypatch.setattr(runner_module, "pose_track_error", lambda *a, **k: next(tracks))
-    result = bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, drift_guard="rollback",
+    result = bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, drift_guard="rollback",
                        drift_tolerance=0.1, **FAST)  # fmt: skip
     assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1"]
     assert result.history[-1]["rolled_back"] and result.poses is None
@@ -202,11 +213,10 @@ def test_drift_guard_tolerance_and_record(tmp_path):
         BootstrapConfig(drift_tolerance=-0.1)
 
 
-@pytest.mark.shared
-def test_stage_records_hold_the_image_evidence(shared, tiny_scene, tmp_path):
+def test_stage_records_hold_the_image_evidence(tiny_scene, tmp_path):
     from lit_boot.bootstrap.evaluate import photo_error, pose_track_error
 
-    result = bootstrap(tiny_scene, tmp_path / "run", flow=fast_flow(shared), video=False, cycles=0, **FAST)
+    result = bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, cycles=0, **FAST)
     initial, flow_1 = result.history
     assert 0 < flow_1["photo_error"] < 48 and 0 < initial["track_error"] < 48
     # the GT flow explains the frames better than zero motion, the GT joint tracks better than
@@ -220,14 +230,28 @@ def test_stage_records_hold_the_image_evidence(shared, tiny_scene, tmp_path):
     assert pose_track_error(frames, joints, keep) < pose_track_error(frames, jitter, keep) - 2
 
 
-@pytest.mark.shared
-def test_2d_mode_with_a_flow_ensemble(shared, tiny_scene, tmp_path):
-    result = bootstrap(tiny_scene, tmp_path / "run", mode="2d", flow=fast_flow(shared), video=False,
+def test_2d_mode_with_a_flow_ensemble(tiny_scene, tmp_path):
+    result = bootstrap(tiny_scene, tmp_path / "run", mode="2d", flow=RANDOM_RAFT, video=False,
                        flow_ensemble=[{"lr": 1e-4}], **FAST)  # fmt: skip
     assert result.poses.mode == "2d" and result.poses.keypoints2d.shape == (4, 17, 2)
     assert (tmp_path / "run/raft_finetuned.pt").is_file() and (tmp_path / "run/raft_finetuned_m1.pt").is_file()
     record = result.history[1]
     assert record["kind"] == "flow" and "kp2d_px" in result.history[2]
+
+
+def test_the_flow_ensemble_averages_every_members_flow(tiny_scene, tmp_path, monkeypatch):
+    members: dict[int, int] = {}
+
+    def constant(model, scene, **kwargs):  # member m "predicts" 1 + 2 m px everywhere, in every stage
+        m = members.setdefault(id(model), len(members))
+        return torch.full((scene.num_frames - 1, 2, scene.height, scene.width), 1.0 + 2.0 * m)
+
+    monkeypatch.setattr(runner_module, "predict_flows", constant)
+    result = bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, cycles=0,
+                       flow_ensemble=[{"lr": 1e-4}, {"lr": 1e-4}], self_check={"method": "off"}, **FAST)  # fmt: skip
+    assert len(members) == 3
+    assert torch.equal(result.initial_flows, torch.full_like(result.initial_flows, 3.0))  # (1 + 3 + 5) / 3
+    assert torch.equal(result.flows, torch.full_like(result.flows, 3.0))  # the flow stage's too
 
 
 # --- command line ---------------------------------------------------------------------------------

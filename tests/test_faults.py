@@ -270,6 +270,38 @@ def test_the_lock_of_a_killed_process_does_not_block(tmp_path):
         assert lock.held and f"pid {os.getpid()} " in (run / ".lock").read_text()
 
 
+def test_an_atomic_write_cut_short_leaves_the_old_file_whole_and_no_leftover(tmp_path, monkeypatch):
+    from lit_boot.data import atomic
+    from lit_boot.data.atomic import atomic_directory, atomic_file, atomic_write_bytes
+
+    target = tmp_path / "summary.json"
+    target.write_bytes(b"old")
+    with pytest.raises(KeyboardInterrupt), atomic_file(target) as tmp:
+        assert tmp != target and tmp.parent == target.parent  # written beside the target, not into it
+        tmp.write_bytes(b"new but half")
+        raise KeyboardInterrupt  # as if killed mid-write
+    assert target.read_bytes() == b"old" and sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"]
+
+    def killed(src, dst):  # killed just before the rename: everything was written, but not in place
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(atomic.os, "replace", killed)
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write_bytes(target, b"new")
+    assert target.read_bytes() == b"old" and sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"]
+    monkeypatch.undo()
+    assert atomic_write_bytes(target, b"new") == target and target.read_bytes() == b"new"
+
+    folder = tmp_path / "flows"
+    folder.mkdir()
+    (folder / "flow_000000.flo").write_bytes(b"old")
+    with pytest.raises(KeyboardInterrupt), atomic_directory(folder, overwrite=True) as tmp:
+        assert tmp != folder
+        (tmp / "flow_000000.flo").write_bytes(b"new")
+        raise KeyboardInterrupt
+    assert [p.read_bytes() for p in folder.iterdir()] == [b"old"] and len(list(tmp_path.iterdir())) == 2
+
+
 def test_remove_partials_clears_unfinished_writes_only(tmp_path):
     from lit_boot.data.atomic import atomic_write_bytes, remove_partials
 

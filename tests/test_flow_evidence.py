@@ -18,6 +18,7 @@ from lit_boot.flow.evidence import (
     region_mean,
     ssim_error,
     tile_mean,
+    track_error,
     warp,
 )
 
@@ -99,6 +100,26 @@ def test_the_true_flow_scores_better_than_perturbed_ones(scene, measure):
         for region in (keep, keep & gt.person_mask[:-1]):
             better = region_mean(error, region) < region_mean(other, region)
             assert better.all(), f"{measure}: GT flow does not beat {name}"
+
+
+def test_the_census_distance_of_a_lone_bright_pixel_is_the_hand_derived_one():
+    # image1: black, one grey-10 pixel at (4, 4); image2: black. The census signature of a
+    # neighbour 10 grey levels away is 10 / sqrt(0.81 + 100) (eps 0.81); of a black one 0. Each
+    # neighbour whose signatures differ by d counts d^2 / (0.1 + d^2).
+    image1 = torch.zeros(1, 3, 9, 9, dtype=torch.uint8)
+    image1[0, :, 4, 4] = 10
+    image2 = torch.zeros_like(image1)
+    d2 = 100.0 / (0.81 + 100.0)
+    one = d2 / (0.1 + d2)  # 0.9084 (a constant of 1 would give 0.4980)
+    expected = torch.zeros(9, 9, dtype=torch.float64)
+    expected[1:8, 1:8] = one  # the 48 pixels whose 7x7 window holds the bright one: one neighbour differs
+    expected[4, 4] = 48 * one  # the bright pixel: all 48 neighbours differ
+    error = census_error(image1, image2)[0].double()
+    torch.testing.assert_close(error, expected, rtol=1e-5, atol=1e-6)
+    # the joint tracks' distance is the same soft Hamming distance
+    point = torch.tensor([[[4.0, 4.0]]])
+    track, valid = track_error(image1, image2, point, point)
+    assert valid.all() and track.item() == pytest.approx(48 * one, rel=1e-5)
 
 
 def test_census_ignores_a_change_of_lighting(scene):

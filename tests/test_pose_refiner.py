@@ -114,6 +114,22 @@ def test_terms_switch_off_and_l3d_alone_changes_nothing(jittered):
     torch.testing.assert_close(model.result.joints3d, jittered.joints3d, atol=1e-4, rtol=0)
 
 
+def test_the_bone_term_at_its_default_weight_is_the_hand_derived_value():
+    scene = still_scene()
+    grown = scene.joints3d.clone()
+    grown[2, LSP14.names.index("right_ankle")] += torch.tensor([0.0, 30.0, 0.0])  # the right shin 3 cm longer at t=2
+    scene = dataclasses.replace(scene, joints3d=grown)
+    model = PoseRefiner(save=False)  # the paper's lambdas
+    model.prepare(scene, torch.zeros(3, 2, 64, 96))
+    _, terms = model.total_loss(with_terms=True)
+    i = torch.tensor(LSP14.length_bones)
+    lengths = (grown[:, i[:, 0]] - grown[:, i[:, 1]]).norm(dim=-1).double() / 1000.0  # (T, B) m
+    change = lengths.diff(dim=0)  # two pairs change by about +-3 cm, under SmoothL1's beta of 1: quadratic
+    assert change.abs().max() > 0.02 and PoseLossWeights().bone == 1.0e4
+    expected = 1.0e4 * (0.5 * change.square()).sum() / 3  # lambda * mean over the 3 pairs of the summed SmoothL1
+    assert terms["bone"].item() == pytest.approx(expected.item(), rel=1e-4)
+
+
 def test_frames_without_detections_give_finite_results(walk):
     conf = walk.keypoints_conf.clone()
     conf[2:5] = 0.0  # three frames without any detection
