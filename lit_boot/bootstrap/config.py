@@ -1,21 +1,8 @@
 """The orchestrator's settings, and the presets that fill in the method's choices.
 
-Presets (``BootstrapConfig.preset``):
-
-- ``paper``: what the authors' code does (REFERENCE section 3): the stick-man painted with
-  30x30 px squares at 22 points per bone (6x6 squares in the 2D-only Sintel script), binary
-  confidences, 20 training updates, SmoothL1 on the final prediction, mixed precision on CUDA
-  (fp16), BatchNorm not frozen; the refiners' paper lambdas.
-- ``default``: the paper's text instead of its code where they differ (a cross of radius 15
-  px), with the footprint scaled to the person's size in the video (15 px at a person
-  450 px tall, as on Human3.6M; never below 2 px), since a fixed 30 px square paints most
-  of a small person and the background around it; the self-check on; and the fast fine-tune
-  (:mod:`lit_boot.flow.warm`: frozen cached encoders, 2 update iterations per step from RAFT's
-  own flow on a crop around the person, lr 3e-5 (2e-5 in 2D mode), the sketch's pixels 5x and
-  no loss within 2 footprint radii beside them; in
-  2D mode the fit stops when its loss stops falling, and backpropagates through the last update
-  only).
-  Everything else as ``paper``.
+Presets (``BootstrapConfig.preset``), each described once, beside its entry in :data:`PRESETS`:
+``paper``, what the authors' code does, and ``default``, the paper's text where it differs,
+the self-check on and the fast fine-tune.
 
 A user's ``flow`` / ``pose`` dicts (FlowTTT's / the refiner's constructor arguments, typed by
 :mod:`~lit_boot.bootstrap.options`) override the preset, key by key (``sketch`` too:
@@ -45,6 +32,11 @@ FAST_FLOW: dict[str, Any] = {"train_parts": "update_block", "warm_start": True, 
 #: Per preset and mode: FlowTTT arguments, refiner arguments, options of the orchestrator.
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "paper": {
+        # what the authors' code does (REFERENCE section 3): the stick-man painted with 30x30 px
+        # squares at 22 points per bone (6x6 in the 2D-only Sintel script) whatever the person's
+        # size, binary confidences, 20 RAFT updates per step from zero, every weight trained, lr
+        # 1e-5, SmoothL1 (beta 1) on the final prediction, BatchNorm not frozen, 16-bit mixed
+        # precision on CUDA (fp16), the refiners' paper lambdas, no self-check
         "flow_3d": {"sketch": {"footprint": "square", "size": 30, "points_per_bone": 22}, "loss": "final",
                     "train_updates": 20, "freeze_batchnorm": False, "lr": 1e-5},
         "flow_2d": {"sketch": {"footprint": "square", "size": 6, "points_per_bone": 22}, "loss": "final",
@@ -54,12 +46,17 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off"},
     },
     "default": {
-        # the fast fine-tune (lit_boot.flow.warm): frozen cached encoders, 2 updates from RAFT's own
-        # flow on a crop around the person, pasted into RAFT's flow; the sketch's pixels weigh
-        # 5x in a SmoothL1 with beta 0.1, the unpainted ones within 2 footprint radii of it not at
-        # all (they may be the limb's: sketch_gap); in 2D (50 epochs) the fit stops when its
-        # loss stops falling and backpropagates through the last update only; the self-check
-        # holds the background (BENCHMARKS.md, "Speed" and "Do no harm")
+        # the paper's text instead of its code where they differ: a cross of radius 15 px at a
+        # person 450 px tall (as on Human3.6M), scaled to the person's height in the video and
+        # never below 2 px (a fixed 30 px square paints most of a small person and the background
+        # around it); the self-check on, which holds the background; and the fast fine-tune
+        # (lit_boot.flow.warm): frozen cached encoders, 2 RAFT updates per step from RAFT's own
+        # flow on a crop around the person, pasted into RAFT's flow, lr 3e-5 (2e-5 in 2D); the
+        # sketch's pixels weigh 5x in a SmoothL1 with beta 0.1, the unpainted ones within 2
+        # footprint radii of it not at all (they may be the limb's: sketch_gap); in 2D (50
+        # epochs) the fit stops when its loss stops falling (3 epochs without a 2% fall) and
+        # backpropagates through the last update only. Everything else as paper.
+        # (BENCHMARKS.md, "Speed", "Do no harm" and "The unknown zone")
         "flow_3d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
                     "sketch_weight": 5.0, "loss_beta": 0.1},
         "flow_2d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 2e-5,
@@ -136,17 +133,11 @@ class BootstrapConfig:
     Args:
         mode: 3d (joints and cameras; the stick-man from projected joints) or 2d (2D keypoints
             only; paper 3.3).
-        preset: the method's choices the run starts from. default: the paper's text, the
-            stick-man painted with crosses of radius 15 px at a person 450 px tall, scaled to
-            the person's height in the video (at least 2 px); the self-check on; the fast
-            fine-tune (2 warm RAFT updates per step on a crop, frozen encoders, lr 3e-5; lr
-            2e-5, the plateau stop and gradients through the last update in 2d mode) with the
-            sketch's pixels 5x in the loss (SmoothL1 beta 0.1) and none on the unpainted
-            pixels within 2 footprint radii of them. paper: the authors' code, 30x30 px
-            squares (6x6 in 2d mode) at 22 points per bone, whatever the person's size, 20 RAFT
-            updates in training from zero, every weight trained, lr 1e-5. Both: loss on the
-            final prediction, binary confidences, 16-bit mixed precision on CUDA. --flow and
-            --pose override them key by key.
+        preset: the method's choices the run starts from. default: the paper's text where it
+            differs from the authors' code (a cross footprint scaled to the person), the
+            self-check on and the fast fine-tune. paper: the authors' code. Each is described
+            beside its entry in PRESETS (lit_boot/bootstrap/config.py). --flow and --pose
+            override them key by key.
         cycles: pose cycles; the run is flow, (pose, flow) x cycles: the paper's 1 gives
             flow -> pose -> flow.
         flow: FlowTTT arguments over the preset's (arch, weights, lr, sketch, crop_margin, ...).
