@@ -55,8 +55,9 @@ def gt_pair_epe(flows: torch.Tensor, scene) -> dict[str, float]:
 def run(scene, out: Path, mode: str, args, video: bool) -> tuple[dict, object]:
     shutil.rmtree(out, ignore_errors=True)
     flow = {"weights": args.weights, **({"sketch": GATE} if args.gate else {}), **json.loads(args.flow)}
-    result = bootstrap(scene, out, mode=mode, flow=flow, flow_epochs=args.epochs, self_check={"method": args.self_check},
-                       pose_steps=args.pose_steps, progress_bar=False, video=video)  # fmt: skip
+    result = bootstrap(scene, out, mode=mode, flow=flow, flow_epochs=args.epochs,
+                       self_check={"method": args.self_check}, pose_steps=args.pose_steps, progress_bar=False,
+                       video=video)  # fmt: skip
     return speed_summary(result), result
 
 

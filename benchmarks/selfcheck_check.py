@@ -128,7 +128,8 @@ def report(runs: dict, args) -> None:
         m_i, m_t = scene_flow_metrics(scene.gt, initial), scene_flow_metrics(scene.gt, tuned)
         for margin in [float(s) for s in args.margins.split(",")]:
             for window in [int(s) for s in args.windows.split(",")]:
-                config = SelfCheckConfig(margin=margin, tile=args.tile, blend=args.blend, window=window, own=bool(args.own))
+                config = SelfCheckConfig(margin=margin, tile=args.tile, blend=args.blend, window=window,
+                                         own=bool(args.own))  # fmt: skip
                 checked, record, weight = self_check(scene.frames, initial, tuned, person, config=config)
                 metrics = (m_i, m_t, scene_flow_metrics(scene.gt, checked))
                 counts = agreement(scene, initial, tuned, person, record, weight, args.tie)

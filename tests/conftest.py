@@ -52,6 +52,7 @@ def trainer(tmp_path):
 
     def make(epochs: int = 1, **kw) -> L.Trainer:
         return L.Trainer(max_epochs=epochs, default_root_dir=tmp_path, logger=False, enable_checkpointing=False,
-                         enable_progress_bar=False, enable_model_summary=False, num_sanity_val_steps=0, **kw)  # fmt: skip
+                         enable_progress_bar=False, enable_model_summary=False, num_sanity_val_steps=0,
+                         **kw)  # fmt: skip
 
     return make

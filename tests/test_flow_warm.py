@@ -74,7 +74,7 @@ def test_warm_fine_tune_follows_the_target_and_pasted_keeps_the_untuned_flow_out
     model = FlowTTT(**{**WARM, "weights": str(shared / "checkpoints/raft-small.pth")}, lr=1e-4, crop_margin=0)
     assert model.hparams.paste_crop  # the default
     data = SceneFlowData(wide, pose_source="gt", shuffle=False)
-    untuned = torch.cat([o["flow"] for o in trainer().predict(model, datamodule=data)])  # RAFT's own flow: builds the cache
+    untuned = torch.cat([o["flow"] for o in trainer().predict(model, datamodule=data)])  # RAFT's own: builds the cache
     cache = model.warm.cache
     assert cache is not None
     torch.testing.assert_close(untuned, cache.base)

@@ -54,7 +54,7 @@ def test_a_corrupted_tile_gets_the_initial_flow_and_an_exact_region_keeps_the_tu
     bad[32:, 64:] = True  # tile_1_2
     initial = torch.where(bad, gt, gt + 1.5)  # exact in tile_1_2, 1.5 px off elsewhere
     tuned = torch.where(bad, gt + 5.0, gt)  # 5 px off in tile_1_2, exact elsewhere
-    config = SelfCheckConfig(margin=0.02, tile=TILE, blend=2, window=5, own=False)  # the box alone decides here (own: below)
+    config = SelfCheckConfig(margin=0.02, tile=TILE, blend=2, window=5, own=False)  # the box alone decides (own: below)
     flows, record, _ = self_check(scene.frames, initial, tuned, person, config=config)
     for pair in record["per_pair"]:
         kept_initial = set(pair["regions"]) - set(pair["tuned"])
@@ -103,7 +103,8 @@ def test_the_blend_is_smooth_and_exact_away_from_borders():
 def test_config_checks_the_self_check_options():
     assert BootstrapConfig().checking == "photometric" and BootstrapConfig(preset="paper").checking == "off"
     assert BootstrapConfig(self_check=SelfCheckConfig(method="off")).checking == "off"
-    assert BootstrapConfig(self_check={"method": "off", "tile": 16}).self_check == SelfCheckConfig(method="off", tile=16)
+    given = BootstrapConfig(self_check={"method": "off", "tile": 16})  # a dict is taken too
+    assert given.self_check == SelfCheckConfig(method="off", tile=16)
     for bad, message in [({"method": "x"}, "self_check.method: expected one of"),
                          ({"margin": 1.0}, "self_check.margin: expected 0 <= margin < 1"),
                          ({"tile": 0}, "self_check.tile: expected >= 1 px"),
@@ -251,7 +252,8 @@ def test_only_the_tiles_where_the_flows_differ_are_measured_and_the_decisions_ar
     initial = gt + torch.tensor([0.7, -0.4]).view(1, 2, 1, 1)  # RAFT off everywhere
     tuned = initial.clone()
     tuned[0, :, 20:70, 40:100] = gt[0, :, 20:70, 40:100]  # pair 0: exact in one part; pair 1: unchanged
-    flows, record, weight = self_check(frames, initial, tuned, person, config=SelfCheckConfig(tile=TILE, window=5, blend=1))
+    config = SelfCheckConfig(tile=TILE, window=5, blend=1)
+    flows, record, weight = self_check(frames, initial, tuned, person, config=config)
     labels, count = region_labels(person, TILE), 2 * 3 * 5
     choices = []
     for t in range(2):  # the same decisions measured over the whole frame

@@ -45,7 +45,8 @@ from ..core import Scene
 from ..flow.evidence import photometric_error
 from .config import SELF_CHECKS, BootstrapConfig, SelfCheckConfig
 
-__all__ = ["SELF_CHECKS", "SelfCheckConfig", "region_labels", "region_names", "choose_regions", "choose_pixels", "blend_weights", "changed_box",
+__all__ = ["SELF_CHECKS", "SelfCheckConfig", "region_labels", "region_names", "choose_regions", "choose_pixels",
+           "blend_weights", "changed_box",
            "self_check", "check_stage", "summary_line"]
 
 #: Regions with fewer valid pixels than this keep the initial flow (too little evidence).

@@ -241,8 +241,8 @@ class FlowTTT(L.LightningModule):
         if self.targets is None:
             scene = self._data_scene()
             if scene is None:
-                raise RuntimeError("FlowTTT: give the data with a SceneFlowData datamodule "
-                                   "(trainer.fit(model, datamodule=SceneFlowData(scene))) or call prepare(scene) first")  # fmt: skip
+                raise RuntimeError("FlowTTT: give the data with a SceneFlowData datamodule (trainer.fit(model, "
+                                   "datamodule=SceneFlowData(scene))) or call prepare(scene) first")  # fmt: skip
             self.prepare(scene, self.trainer.datamodule.sketch_inputs())
             for logger in self.loggers:
                 logger.log_metrics(self.target_report, step=0)

@@ -194,7 +194,8 @@ class WarmStart:
     """
 
     def __init__(self, raft: RAFT, loss: Callable[[list[Tensor], Tensor, Tensor], Tensor], *, train_updates: int,
-                 grad_updates: int | None, predict_updates: int, crop_margin: int | None, paste_crop: bool):  # fmt: skip
+                 grad_updates: int | None, predict_updates: int, crop_margin: int | None,
+                 paste_crop: bool):  # fmt: skip
         self.raft, self.loss_fn = raft, loss
         self.train_updates, self.grad_updates, self.predict_updates = train_updates, grad_updates, predict_updates
         self.crop_margin, self.paste_crop = crop_margin, paste_crop
@@ -277,6 +278,7 @@ class WarmStart:
         base = self.cache.base
         if not self.tuned:
             return base[index]
+        pairs = zip(index.tolist(), self._flows(index, grad=False), self._boxes(index, grad=False))
         out = [base[i] if flows is None else paste(base[i], flows[-1].float().cpu(), box, self.cache.pad)
-               for i, flows, box in zip(index.tolist(), self._flows(index, grad=False), self._boxes(index, grad=False))]  # fmt: skip
+               for i, flows, box in pairs]  # fmt: skip
         return torch.stack(out)
