@@ -215,3 +215,15 @@ def test_summary_mentions_frames_size_and_flow():
 def test_summary_of_bare_scene():
     text = Scene(frames=torch.zeros(2, 3, 5, 7, dtype=torch.uint8), fps=30).summary()
     assert text == "scene 'scene': 2 frames, 7x5 px, 30 fps"
+
+
+def test_a_pose_estimator_that_found_nobody_is_named_as_such():
+    nobody = dict(keypoints_conf=torch.zeros(T, 17))
+    with pytest.raises(ValueError, match="'unit': no person in any frame .*found nobody"):
+        Scene(**scene_fields(**nobody)).require_pose("2d")
+    with pytest.raises(ValueError, match="no person in any frame"):  # 3D: no joints because nobody was found
+        Scene(**scene_fields(joints3d=None, cameras=None, **nobody)).require_pose("3d")
+    Scene(**scene_fields(**nobody)).require_pose("3d")  # 3D joints given: they are the pose
+    with pytest.raises(ValueError, match="3D mode needs 3D joints"):  # keypoints found, no 3D: as before
+        Scene(**scene_fields(joints3d=None, cameras=None)).require_pose("3d")
+    Scene(**scene_fields()).require_pose("2d")

@@ -27,7 +27,9 @@ Nothing heavy (torch, Lightning) is imported before a command's arguments are pa
 own lines (its log records) and progress bars; Lightning's info lines and known dependency
 warnings are dropped (:mod:`.console`) unless ``lit-boot --verbose COMMAND ...`` or
 ``LIT_BOOT_VERBOSE=1``. A bad argument or input file is one ``lit-boot COMMAND: error: ...``
-line on stderr and exit status 2.
+line on stderr, naming the option or file, and exit status 2; an unknown option gets the closest
+known one ("did you mean"). Options are spelled with ``_`` or ``-`` alike (``--flow_epochs``,
+``--flow-epochs``).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import sys
 from argparse import ArgumentError
 from typing import Callable, NamedTuple
 
-from .console import command_output, error_line, is_user_error, verbose_requested
+from .console import command_output, error_line, is_user_error, normalize_options, verbose_requested
 
 __all__ = ["main", "COMMANDS", "Command"]
 
@@ -108,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"lit-boot: error: unknown command {name!r}; one of {', '.join(COMMANDS)} (lit-boot --help)",
               file=sys.stderr)  # fmt: skip
         return 2
-    command = COMMANDS[name]
+    command, argv = COMMANDS[name], normalize_options(argv)  # --flow-epochs is --flow_epochs
     try:
         with command_output(verbose):
             return command.load()(argv if command.with_name else argv[1:])

@@ -4,7 +4,9 @@ and the parsers' shared pieces.
 Cheap to import (no torch, no Lightning): the command line parses, and answers ``--help``, first.
 
 - :class:`ArgumentParser`: jsonargparse's parser with the command line's defaults (no abbreviated
-  options; a bad argument raises instead of printing the whole usage); :func:`dataclass_from`
+  options, "did you mean" for an unknown one; a bad argument raises instead of printing the whole
+  usage); :func:`normalize_options`: ``--flow-epochs`` is ``--flow_epochs`` (every command takes
+  both spellings); :func:`dataclass_from`
   builds a settings dataclass from the options its fields made; :func:`set_help` fills or
   replaces the help of options made from a signature; :func:`refuse_to_overwrite` guards ``--out``;
 - :func:`command_output`: around each command: lit-boot's log records (``lit_boot.*``) to stdout
@@ -19,38 +21,24 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import difflib
 import logging
 import os
 import re
 import sys
 import threading
-import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import Any, get_type_hints
 
 import jsonargparse
 
-__all__ = ["ArgumentParser", "CliError", "HelpFormatter", "command_output", "dataclass_from", "drop_native_noise",
-           "error_line", "is_user_error", "plain", "refuse_to_overwrite", "set_help", "verbose_requested"]
+from ..quiet import quiet_lightning
 
-#: Lightning loggers whose INFO records are noise on the command line (WARNING and up stay).
-LIGHTNING_INFO_LOGGERS = (
-    "lightning.pytorch.utilities.rank_zero",  # "GPU available: ...", "TPU available: ...", the 💡 litlogger /
-    "lightning.fabric.utilities.rank_zero",  # litmodels tips, "`Trainer.fit` stopped: ...", "Restoring states ..."
-    "lightning.fabric.utilities.seed",  # "Seed set to 0"
-    "lightning.pytorch.callbacks.model_summary",  # the parameter table at the start of fit
-    "lightning.pytorch.accelerators.cuda",  # "LOCAL_RANK: 0 - CUDA_VISIBLE_DEVICES: [0]"
-)
-
-#: (message regex, category, module regex) of dependency warnings that say nothing to a user.
-KNOWN_WARNINGS = (
-    # torch >= 2.10 deprecates LeafSpec, which Lightning's pytree helper still builds (every Trainer run)
-    (r"`isinstance\(treespec, LeafSpec\)` is deprecated", FutureWarning, r"lightning\.pytorch\.utilities\._pytree"),
-    # lit-boot passes the command line to LightningCLI as args on purpose
-    (r"LightningCLI's args parameter is intended to run from within Python", UserWarning, r"lightning\.pytorch\.cli"),
-)
+__all__ = ["ArgumentParser", "CliError", "HelpFormatter", "Suggesting", "command_output", "dataclass_from",
+           "drop_native_noise", "error_line", "is_user_error", "normalize_options", "plain", "refuse_to_overwrite",
+           "set_help", "suggest_options", "verbose_requested"]
 
 #: MediaPipe's native (C++) start-up lines on stderr: TFLite's delegate notice, absl's pre-init note
 #: and its feedback-tensor warning (once per model).
@@ -89,9 +77,52 @@ class HelpFormatter(jsonargparse.DefaultHelpFormatter):
         super().start_section(plain(heading) if heading else heading)
 
 
-class ArgumentParser(jsonargparse.ArgumentParser):
-    """jsonargparse's ArgumentParser, but ``--epoch`` is not taken for ``--epochs`` and a bad
-    argument raises :class:`argparse.ArgumentError` (``main()`` prints it as one line)."""
+def normalize_options(argv: Sequence[str]) -> list[str]:
+    """``argv`` with ``-`` in option names spelled ``_`` (``--flow-epochs 2`` ->
+    ``--flow_epochs 2``, ``--data.max-frames=3`` -> ``--data.max_frames=3``): every lit-boot
+    option is spelled with underscores, and both spellings are taken. Values, and everything
+    after a bare ``--``, are left as they are."""
+    out, rest = [], False
+    for arg in argv:
+        if arg == "--":
+            rest = True
+        elif not rest and arg.startswith("--") and len(arg) > 2 and not arg[2].isdigit():
+            name, sep, value = arg[2:].partition("=")
+            arg = "--" + name.replace("-", "_") + sep + value
+        out.append(arg)
+    return out
+
+
+def suggest_options(message: str, known: Iterable[str]) -> str:
+    """``message`` ("unrecognized arguments: --flow_epoch 2") with the closest known option of
+    each unknown one added ("; did you mean --flow_epochs?"); as it is when none is close."""
+    match = re.match(r"unrecognized arguments: (.*)$", message, re.S)
+    if not match or "; did you mean" in message:  # a nested parser's error passes through its parent's
+        return message
+    known = sorted({k for k in known if k.startswith("--")})
+    hints = []
+    for arg in match.group(1).split():
+        name = arg.split("=", 1)[0]
+        if name.startswith("--") and name not in known:
+            close = difflib.get_close_matches(name, known, n=1, cutoff=0.75)
+            hints += [(close[0], name)] if close else []
+    if len(hints) > 1:
+        return message + "; did you mean " + ", ".join(f"{option} (for {name})" for option, name in hints) + "?"
+    return message + (f"; did you mean {hints[0][0]}?" if hints else "")
+
+
+class Suggesting:
+    """A parser mixin: an unknown option's error names the closest known one
+    (:func:`suggest_options`)."""
+
+    def error(self, message: str, ex: Exception | None = None):
+        return super().error(suggest_options(message, self._option_string_actions), ex)
+
+
+class ArgumentParser(Suggesting, jsonargparse.ArgumentParser):
+    """jsonargparse's ArgumentParser, but ``--epoch`` is not taken for ``--epochs`` (it is an
+    error that suggests ``--epochs``) and a bad argument raises :class:`argparse.ArgumentError`
+    (``main()`` prints it as one line)."""
 
     def __init__(self, *args, allow_abbrev: bool = False, exit_on_error: bool = False, **kwargs) -> None:
         kwargs.setdefault("formatter_class", HelpFormatter)
@@ -152,35 +183,26 @@ class _Stdout(logging.StreamHandler):
 def command_output(verbose: bool = False) -> Iterator[None]:
     """Within the block (one command): lit-boot's log records (``lit_boot.*``, INFO and up; DEBUG
     too with ``verbose``) go to stdout as plain lines, and only there (not on to the root
-    logger's handlers); unless ``verbose``, Lightning's info lines and :data:`KNOWN_WARNINGS` are
-    dropped and every other warning from Lightning or torch* shows once per message (not once
-    per stage). The handler is removed and the levels restored after."""
+    logger's handlers); unless ``verbose``, Lightning's info lines and the known dependency
+    warnings are dropped and every other warning from Lightning or torch* shows once per message
+    (:func:`lit_boot.quiet.quiet_lightning`). The handler is removed and the levels restored after."""
     global _verbose
     ours = logging.getLogger("lit_boot")
     handler = _Stdout()
     handler.setFormatter(logging.Formatter("%(message)s"))
-    loggers = [ours, *map(logging.getLogger, LIGHTNING_INFO_LOGGERS)]
-    levels, propagate = [logger.level for logger in loggers], ours.propagate
+    level, propagate = ours.level, ours.propagate
     ours.addHandler(handler)
     ours.setLevel(logging.DEBUG if verbose else logging.INFO)
     ours.propagate = False
     was_verbose, _verbose = _verbose, verbose
-    with warnings.catch_warnings():
-        if not verbose:
-            for name in LIGHTNING_INFO_LOGGERS:  # children of Lightning's loggers: kept when it is imported
-                logging.getLogger(name).setLevel(logging.WARNING)
-            for category in (UserWarning, RuntimeWarning, FutureWarning):  # the ones Python shows by default
-                warnings.filterwarnings("once", category=category, module=r"(lightning|torch\w*)(\.|$)")
-            for message, category, module in KNOWN_WARNINGS:
-                warnings.filterwarnings("ignore", message=message, category=category, module=module)
+    with nullcontext() if verbose else quiet_lightning():
         try:
             yield
         finally:
             _verbose = was_verbose
             ours.removeHandler(handler)
             ours.propagate = propagate
-            for logger, level in zip(loggers, levels):
-                logger.setLevel(level)
+            ours.setLevel(level)
 
 
 _PARSER_KEY = re.compile(r'Parser key "([^"]+)":\s*')
@@ -190,8 +212,11 @@ _UNION = "Does not validate against any of the Union subtypes"
 
 def error_line(err: BaseException) -> str:
     """``err`` as one line: jsonargparse's ``Parser key "x":`` as ``--x:``, its union reports as the
-    reasons that are not "expected None", no ``Namespace(...)`` dumps."""
+    reasons that are not "expected None", no ``Namespace(...)`` dumps; an OSError as "path:
+    reason" (no errno)."""
     text = str(err).strip()
+    if isinstance(err, OSError) and err.filename is not None and err.strerror:  # not "[Errno 13] ..."
+        text = f"{err.filename}: {err.strerror}" + (f" ({err.filename2})" if err.filename2 else "")
     if _UNION in text:
         text = _union_reasons(text)
     text = _PARSER_KEY.sub(lambda m: f"--{m.group(1)}: ", text)

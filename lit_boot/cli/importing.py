@@ -27,6 +27,7 @@ from functools import cache
 from pathlib import Path
 from typing import Any, Callable
 
+from .checks import check_input_paths, check_video_options
 from .console import ArgumentParser, CliError, drop_native_noise, plain, refuse_to_overwrite, set_help
 
 __all__ = ["import_scene", "import_parser", "estimate_pose", "estimate_pose_parser", "with_poses", "KINDS"]
@@ -108,7 +109,8 @@ def _add_reader_arguments(parser: ArgumentParser, kind: str) -> None:
 
 
 def with_poses(scene, poses: Path | None, estimate: bool):
-    """``scene`` with estimates from the file ``poses`` or from MediaPipe (``estimate``)."""
+    """``scene`` with estimates from the file ``poses`` or from MediaPipe (``estimate``; a scene
+    in which MediaPipe finds nobody raises :class:`~lit_boot.estimate.NoPersonFound`)."""
     if poses is not None and estimate:
         raise ValueError("--poses and --estimate: give one of them, not both")
     if poses is not None:
@@ -116,19 +118,25 @@ def with_poses(scene, poses: Path | None, estimate: bool):
 
         return read_estimates(poses).apply_to(scene)
     if estimate:
-        from ..estimate import estimate_poses
+        from ..estimate import estimate_poses, require_person
 
         with drop_native_noise():  # MediaPipe's native start-up lines
-            return estimate_poses(scene.frames).apply_to(scene)
+            est = estimate_poses(scene.frames)
+        return require_person(est, f"scene {scene.name!r}").apply_to(scene)  # nobody: no pose to bootstrap
     return scene
 
 
 def import_scene(argv: list[str]) -> int:
     """``lit-boot import``: read, attach poses, save the scene folder, print its summary."""
     args = import_parser([argv[0]] if argv[:1] and argv[0] in KINDS else []).parse_args(argv)
+    options = dict(vars(args[args.kind]))
+    if args.kind == "video":  # before torch is imported
+        check_video_options("", options["stride"], options["max_frames"], options["resize"])
+        if not Path(options["path"]).exists():
+            raise CliError(f"PATH {options['path']}: no such video file or folder of frames")
+        check_input_paths(None, None, options["poses"], prefix="")
     from ..data import save_scene
 
-    options = dict(vars(args[args.kind]))
     poses, estimate = options.pop("poses"), options.pop("estimate")
     out, overwrite = options.pop("out"), options.pop("overwrite")
     refuse_to_overwrite(out, overwrite)
@@ -152,14 +160,14 @@ def estimate_pose_parser() -> ArgumentParser:
     parser.add_argument("video", type=Path, help="a video file (e.g. .mp4) or a folder of frames")
     parser.add_argument("--out", type=Path, required=True, help="pose file to write (.npz or .json)")
     parser.add_argument("--stride", type=int, default=1, help="use every N-th frame")
-    parser.add_argument("--max_frames", "--max-frames", type=int | None, default=None, help="use at most N frames")
+    parser.add_argument("--max_frames", type=int | None, default=None, help="use at most N frames")
     parser.add_argument("--resize", type=int | float | None, default=None,
                         help="resize frames first: a height in px (int, e.g. 360) or a scale (float, e.g. 0.5)")  # fmt: skip
-    parser.add_argument("--model_complexity", "--model-complexity", type=int, default=1,
+    parser.add_argument("--model_complexity", type=int, default=1,
                         help="0, 1 or 2 (only 1 ships with mediapipe; 0 and 2 are downloaded on first use)")  # fmt: skip
-    parser.add_argument("--min_detection_confidence", "--min-detection-confidence", type=float, default=0.5,
+    parser.add_argument("--min_detection_confidence", type=float, default=0.5,
                         help="MediaPipe's person detector threshold")  # fmt: skip
-    parser.add_argument("--on_jump", "--on-jump", type=str, default="keep", help="keep or drop detections that jump")
+    parser.add_argument("--on_jump", type=str, default="keep", help="keep or drop detections that jump")
     parser.add_argument("--overwrite", type=bool, nargs="?", const=True, default=False, help="replace --out")
     return parser
 
@@ -167,6 +175,9 @@ def estimate_pose_parser() -> ArgumentParser:
 def estimate_pose(argv: list[str]) -> int:
     """``lit-boot estimate-pose``: MediaPipe Pose on a video -> pose file; one summary line."""
     args = estimate_pose_parser().parse_args(argv)
+    check_video_options("", args.stride, args.max_frames, args.resize)  # before torch is imported
+    if not args.video.exists():
+        raise CliError(f"VIDEO {args.video}: no such video file or folder of frames")
     from ..estimate import MediaPipeUnavailable, estimate_pose_file
 
     options = {k: v for k, v in vars(args).items() if k not in ("video", "out", "overwrite")}

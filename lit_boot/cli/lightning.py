@@ -23,7 +23,7 @@ import lightning as L
 from lightning.pytorch.callbacks import Callback, ModelSummary, ProgressBar, TQDMProgressBar
 from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
 
-from .console import CliError, HelpFormatter, error_line
+from .console import CliError, HelpFormatter, Suggesting, error_line
 
 __all__ = ["LitBootArgumentParser", "LitBootCLI", "lightning", "run_lightning_cli"]
 
@@ -31,7 +31,7 @@ __all__ = ["LitBootArgumentParser", "LitBootCLI", "lightning", "run_lightning_cl
 BOOKKEEPING = ("events.out.tfevents.*", "hparams.yaml", "config.yaml", "metrics.csv")
 
 
-class LitBootArgumentParser(LightningArgumentParser):
+class LitBootArgumentParser(Suggesting, LightningArgumentParser):
     """Lightning's parser with lit-boot's defaults (see :class:`lit_boot.cli.console.ArgumentParser`)."""
 
     def __init__(self, *args, allow_abbrev: bool = False, exit_on_error: bool = False, **kwargs) -> None:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from jsonargparse import ActionConfigFile
 
+from .checks import check_input_paths, check_video_options, name_option
 from .console import ArgumentParser, CliError, dataclass_from, set_help
 
 __all__ = ["bootstrap", "bootstrap_parser", "demo", "demo_parser", "DEMO_SCENE"]
@@ -46,17 +47,42 @@ def bootstrap_parser() -> ArgumentParser:
     parser.add_argument("--out", type=Path | None, default=None, help="run folder (default runs/<scene>/bootstrap)")
     parser.add_argument("--overwrite", type=bool, default=False, help="delete an existing run folder first")
     parser.add_class_arguments(BootstrapConfig, nested_key=None, as_group=False)
+    parser.set_defaults(progress_bar=True)  # the command shows its bars (from Python, the config's default)
     return parser
 
 
+def _options(parser: ArgumentParser) -> list[str]:
+    return list(parser._option_string_actions)
+
+
 def bootstrap(argv: list[str]) -> int:
-    """``lit-boot bootstrap``: run (or resume) the method on one scene; print the table."""
-    args = bootstrap_parser().parse_args(argv)
-    from ..bootstrap import Bootstrap, BootstrapConfig
+    """``lit-boot bootstrap``: run (or resume) the method on one scene; print the table. The
+    inputs and the settings are checked before torch is imported; an error from a setting names
+    its option."""
+    parser = bootstrap_parser()
+    args = parser.parse_args(argv)
+    from ..bootstrap import BootstrapConfig
 
     data = args.data
     if (data.scene is None) == (data.video is None):
         raise CliError("give one of --data.scene DIR (a scene folder) or --data.video PATH (a video or frame folder)")
+    check_input_paths(data.scene, data.video, data.poses)
+    check_video_options("data.", data.stride, data.max_frames, data.resize)
+    try:
+        config = dataclass_from(args, BootstrapConfig)
+    except ValueError as err:
+        raise name_option(err, _options(parser)) from err
+    aliases = {key: f"--flow.{key}" for key in config.flow} | {key: f"--pose.{key}" for key in config.pose}
+    try:
+        return _run_bootstrap(args, config)
+    except ValueError as err:  # a FlowTTT / refiner argument the user gave, checked when it is built
+        raise name_option(err, _options(parser), aliases) from err
+
+
+def _run_bootstrap(args, config) -> int:
+    from ..bootstrap import Bootstrap
+
+    data = args.data
     scene, out = data.scene, args.out
     if data.video is not None:
         from ..data.readers import read_video
@@ -66,7 +92,7 @@ def bootstrap(argv: list[str]) -> int:
                            poses=data.poses)  # fmt: skip
         scene = with_poses(scene, None, estimate=data.poses is None)
         out = out or Path("runs") / data.video.stem / "bootstrap"
-    result = Bootstrap(scene, out, dataclass_from(args, BootstrapConfig), overwrite=args.overwrite).run()
+    result = Bootstrap(scene, out, config, overwrite=args.overwrite).run()
     print(result.table())
     print(f"wrote {result.run_dir}")
     return 0
@@ -108,7 +134,16 @@ def demo_minutes(frames: int, height: int, width: int, epochs: int) -> float:
 def demo(argv: list[str]) -> int:
     """``lit-boot demo``: synthetic scene -> bootstrap -> before/after table. Prints first what it
     will do and about how long it takes from scratch on a 2-core CPU (measured: see README)."""
-    args = demo_parser().parse_args(argv)
+    parser = demo_parser()
+    args = parser.parse_args(argv)
+    from ..synth import SynthConfig
+
+    try:
+        SynthConfig(**{k: args[k] for k in DEMO_SCENE})  # its checks, before the banner and torch
+    except ValueError as err:
+        raise name_option(err, _options(parser)) from err
+    if args.epochs is not None and args.epochs < 1:
+        raise CliError(f"--epochs: expected an integer >= 1, got {args.epochs}")
     from ..bootstrap import Bootstrap
     from ..data import load_scene, save_scene
     from ..synth import make_scene
@@ -129,7 +164,7 @@ def demo(argv: list[str]) -> int:
         spec_file.write_text(json.dumps(stored) + "\n")
     scene = load_scene(scene_dir)
     print(scene.summary())
-    run = Bootstrap(scene_dir, out / "bootstrap", overwrite=fresh, flow_epochs=epochs,
+    run = Bootstrap(scene_dir, out / "bootstrap", overwrite=fresh, flow_epochs=epochs, progress_bar=True,
                     flow={"arch": args.arch, "weights": args.weights})  # fmt: skip
     result = run.run()
     print(f"\nlit-boot demo: {scene.name}, {scene.num_frames} frames {scene.width}x{scene.height}; "

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from jsonargparse import ActionConfigFile
 
+from .checks import name_option
 from .console import ArgumentParser, dataclass_from, refuse_to_overwrite
 
 __all__ = ["synth", "synth_parser"]
@@ -32,13 +33,19 @@ def synth_parser() -> ArgumentParser:
 
 def synth(argv: list[str]) -> int:
     """``lit-boot synth``: generate, save, summarise."""
-    args = synth_parser().parse_args(argv)
-    from ..data import save_scene, scene_preview, write_png
-    from ..synth import SynthConfig, make_scene
+    parser = synth_parser()
+    args = parser.parse_args(argv)
+    from ..synth import SynthConfig
 
     out: Path = args.out
     refuse_to_overwrite(out, args.overwrite, "a saved scene")
-    config = dataclass_from(args, SynthConfig)
+    try:
+        config = dataclass_from(args, SynthConfig)
+    except ValueError as err:  # before torch is imported, naming the option
+        raise name_option(err, parser._option_string_actions) from err
+    from ..data import save_scene, scene_preview, write_png
+    from ..synth import make_scene
+
     scene = make_scene(config)
     save_scene(scene, out, overwrite=args.overwrite)
     print(scene.summary())

@@ -186,9 +186,14 @@ class Scene:
     # --- the pose in the method's two modes (the one place the 3D/2D switch is made) --------------
     def require_pose(self, mode: str) -> None:
         """Raise ValueError (naming the scene) unless it has the pose ``mode`` works from: "3d",
-        3D joints with cameras; "2d", 2D keypoints."""
+        3D joints with cameras; "2d", 2D keypoints with a confidence above 0 somewhere. Keypoints
+        of confidence 0 everywhere (a pose estimator that found nobody) are named as such."""
         if mode not in POSE_MODES:
             raise ValueError(f"mode: expected one of {POSE_MODES}, got {mode!r}")
+        nobody = self.keypoints_conf is not None and not bool((self.keypoints_conf > 0).any())
+        if nobody and (mode == "2d" or self.joints3d is None):
+            raise ValueError(f"scene {self.name!r}: no person in any frame (every keypoint has confidence 0: the "
+                             "pose estimator found nobody), so there is nothing to bootstrap")  # fmt: skip
         if mode == "3d" and (self.joints3d is None or self.cameras is None):
             raise ValueError(f"scene {self.name!r}: 3D mode needs 3D joints with cameras (use mode '2d')")
         if mode == "2d" and self.keypoints2d is None:

@@ -35,10 +35,28 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)
+    except OSError as err:
+        _unlink_quietly(tmp)
+        raise _naming(err, tmp, path) from None
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        _unlink_quietly(tmp)
         raise
     _fsync_dir(path.parent)
+
+
+def _unlink_quietly(path: Path) -> None:
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:  # e.g. a read-only folder, where it was never made
+        pass
+
+
+def _naming(err: OSError, tmp: Path, path: Path) -> OSError:
+    """``err`` naming ``path`` where it named the hidden temporary ``tmp`` (a read-only folder:
+    "[Errno 13] Permission denied: 'out/config.json'", not the temporary's name)."""
+    if err.filename not in (str(tmp), tmp) or err.errno is None:
+        return err
+    return type(err)(err.errno, err.strerror, str(path))
 
 
 def _fsync_dir(folder: Path) -> None:
@@ -115,7 +133,10 @@ def atomic_directory(
     _check_target(path, overwrite, may_replace, replaceable)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = _temp_name(path, "partial")
-    tmp.mkdir()
+    try:
+        tmp.mkdir()
+    except OSError as err:
+        raise _naming(err, tmp, path) from None
     try:
         yield tmp
         _check_target(path, overwrite, may_replace, replaceable)  # it may have appeared meanwhile

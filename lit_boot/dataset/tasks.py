@@ -90,8 +90,9 @@ class Task:
         (:func:`~lit_boot.dataset.chunks.slice_scene`). A video chunk decodes its own frames only
         (``read_video``'s ``first``); the other kinds read the whole scene, then cut.
 
-        Raises ValueError naming the task for bad args or frames beyond the scene, and the
-        readers' errors naming the file: FileNotFoundError (missing path), DatasetFormatError /
+        Raises ValueError naming the task for bad args or frames beyond the scene,
+        :class:`~lit_boot.estimate.NoPersonFound` when MediaPipe finds nobody, and the readers'
+        errors naming the file: FileNotFoundError (missing path), DatasetFormatError /
         SceneFormatError (unreadable or inconsistent file, bad video, poses not matching).
         """
         from .chunks import slice_scene
@@ -107,9 +108,10 @@ class Task:
             else:
                 scene = slice_scene(scene, start, stop)
         if estimate and self.poses is None and scene.keypoints2d is None and scene.joints3d is None:
-            from ..estimate import estimate_poses
+            from ..estimate import estimate_poses, require_person
 
-            scene = estimate_poses(scene).apply_to(scene)  # rows matched by metadata["frame_indices"]
+            est = require_person(estimate_poses(scene), f"task {self.name!r}")  # nobody: this task fails, named
+            scene = est.apply_to(scene)  # rows matched by metadata["frame_indices"]
         return scene
 
     def num_frames(self) -> int:

@@ -15,7 +15,9 @@ Frames where nobody is found are kept, with keypoints 0 and confidence 0, and li
 ``metadata["missing_frames"]``; their 3D joints and cameras are copied from the nearest frame
 with a person (``metadata["filled_from"]``) so downstream optimisation stays finite. A
 detection whose box centre moves more than ``max_jump`` box sizes per frame is listed in
-``metadata["jumps"]`` and kept (``on_jump="keep"``) or treated as nobody (``"drop"``).
+``metadata["jumps"]`` and kept (``on_jump="keep"``) or treated as nobody (``"drop"``). A video in
+which nobody is found in any frame has no pose to bootstrap: :func:`estimate_pose_file` (and the
+command line) refuse it with :class:`NoPersonFound`, writing nothing.
 """
 
 from __future__ import annotations
@@ -47,6 +49,8 @@ __all__ = [
     "estimate_poses",
     "estimate_pose_file",
     "summary_line",
+    "NoPersonFound",
+    "require_person",
 ]
 
 #: The MediaPipe version lit-boot's extra pins (its legacy ``mp.solutions.pose`` API).
@@ -259,6 +263,20 @@ def _scene_frame_indices(scene: Scene) -> torch.Tensor | None:
     return None if value is None else torch.as_tensor(value, dtype=torch.int64)
 
 
+class NoPersonFound(ValueError):
+    """MediaPipe Pose found nobody in any frame: there is no pose to bootstrap."""
+
+
+def require_person(est: PoseEstimates, what: str | os.PathLike) -> PoseEstimates:
+    """``est`` if a person was found in at least one frame; else :class:`NoPersonFound` naming
+    ``what`` (the video or scene) and what to try."""
+    if not bool(est.found().any()):
+        raise NoPersonFound(f"{what}: MediaPipe Pose found no person in any of the {est.num_frames} frames, so there "
+                            "is no pose to bootstrap (a lower min_detection_confidence than 0.5 may find one; the "
+                            "method needs one person visible in most frames)")  # fmt: skip
+    return est
+
+
 def summary_line(est: PoseEstimates) -> str:
     """One line: frames, frames with a person, mean keypoint confidence over those frames."""
     found = est.found()
@@ -274,8 +292,8 @@ def estimate_pose_file(
 ) -> tuple[PoseEstimates, str]:
     """Estimate poses for ``video`` (file or folder of frames) and write them atomically to
     ``out`` (.npz or .json, :func:`save_poses`); ``options`` go to :func:`estimate_poses`.
-    Refuses (FileExistsError) to replace ``out`` unless ``overwrite``. Returns (estimates,
-    :func:`summary_line`)."""
+    Refuses (FileExistsError) to replace ``out`` unless ``overwrite``, and (:class:`NoPersonFound`,
+    nothing written) a video in which nobody is found. Returns (estimates, :func:`summary_line`)."""
     out, video = Path(out), Path(video)
     if out.suffix.lower() not in (".npz", ".json"):
         raise ValueError(f"--out {out}: expected a .npz or .json file name")
@@ -284,6 +302,6 @@ def estimate_pose_file(
     if not video.exists():
         raise FileNotFoundError(f"{video}: no such video file or folder of frames")
     import_mediapipe()  # fail before decoding the video
-    est = estimate_poses(video, **options)
+    est = require_person(estimate_poses(video, **options), video)
     save_poses(est, out)
     return est, summary_line(est)

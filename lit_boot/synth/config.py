@@ -5,7 +5,7 @@ Plain dataclasses with no heavy imports, so the command line can list them witho
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 __all__ = ["MOTION_KINDS", "EstimateConfig", "SynthConfig", "ACCURATE_DETECTOR"]
 
@@ -129,7 +129,23 @@ class SynthConfig:
             raise ValueError("SynthConfig.bvh: motion 'bvh' needs the path of a BVH file")
         if self.frames < 2:
             raise ValueError(f"SynthConfig.frames: expected at least 2 frames, got {self.frames}")
-        if self.height < 16 or self.width < 16:
-            raise ValueError(f"SynthConfig.height/width: expected at least 16 px, got {self.height}x{self.width}")
+        for side in ("height", "width"):
+            if getattr(self, side) < 16:
+                raise ValueError(f"SynthConfig.{side}: expected at least 16 px, got {getattr(self, side)}")
         if self.fps <= 0:
             raise ValueError(f"SynthConfig.fps: expected a positive rate, got {self.fps}")
+        _check_estimates(self.estimates)
+
+
+def _check_estimates(config: EstimateConfig) -> None:
+    """ValueError naming the field (``SynthConfig.estimates.<name>``) for a negative amount, a
+    probability or share above 1, a confidence above 1, or a range whose low end is above its high."""
+    for f in fields(config):
+        value, name = getattr(config, f.name), f"SynthConfig.estimates.{f.name}"
+        values = value if isinstance(value, tuple) else (value,)
+        if any(v < 0 for v in values):
+            raise ValueError(f"{name}: expected values >= 0, got {value}")
+        if (f.name.endswith(("_prob", "_share", "_conf"))) and any(v > 1 for v in values):
+            raise ValueError(f"{name}: expected values <= 1 (a probability or share), got {value}")
+        if isinstance(value, tuple) and (len(value) != 2 or value[0] > value[1]):
+            raise ValueError(f"{name}: expected a range (low, high) with low <= high, got {value}")
