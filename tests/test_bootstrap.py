@@ -42,8 +42,9 @@ def folder_digest(path):
 
 
 def test_config_stages_and_presets():
-    assert BootstrapConfig().stages() == ["flow_1", "pose_1", "flow_2"]
-    assert BootstrapConfig(cycles=2).stages() == ["flow_1", "pose_1", "flow_2", "pose_2", "flow_3"]
+    assert BootstrapConfig().stages() == ["zoom", "flow_1", "pose_1", "flow_2"]
+    assert BootstrapConfig(cycles=2, zoom={"method": "off"}).stages() == ["flow_1", "pose_1", "flow_2", "pose_2",
+                                                                           "flow_3"]  # fmt: skip
     assert BootstrapConfig(mode="2d").epochs == 50 and BootstrapConfig().epochs == 8
     paper = BootstrapConfig(preset="paper").flow_kwargs(person_px=90)
     assert paper["sketch"] == {"footprint": "square", "size": 30, "points_per_bone": 22}
@@ -124,7 +125,7 @@ def test_run_produces_every_output_and_improves_the_pose(shared, tiny_scene, tmp
     for name in ("config.json", "summary.json", "metrics.png", "overlay.mp4", "poses.npz", "pose_report.json",
                  "raft_finetuned.pt", "flows/flow_000000.flo", "flows/flow_000002.png"):  # fmt: skip
         assert (run / name).is_file(), name
-    assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1", "flow_2"]
+    assert [r["stage"] for r in result.history] == ["initial", "zoom", "flow_1", "pose_1", "flow_2"]
     summary = json.loads((run / "summary.json").read_text())
     assert summary["speed"]["frames"] == 4 and summary["speed"]["ratio_to_raft"] > 1
     assert {"epe", "epe_person", "epe_joints", "mpjpe_mm", "agreement_px"} <= set(summary["before_after"])
@@ -170,10 +171,10 @@ def test_interrupted_run_resumes_after_the_last_finished_stage(tiny_scene, tmp_p
     tuned = torch.load(tmp_path / "run/stages/flow_1/raft_0.pt", weights_only=True)
     assert not all(torch.equal(built[0][k], v) for k, v in tuned.items())  # flow_1 changed the weights
     assert all(torch.equal(starts[0][k], v) for k, v in tuned.items())
-    assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1", "flow_2"]
+    assert [r["stage"] for r in result.history] == ["initial", "zoom", "flow_1", "pose_1", "flow_2"]
     # the summary dashboard holds each stage once, although the first run logged some of them too
     with open(tmp_path / "run/logs/csv/summary/metrics.csv") as f:
-        assert [int(row["step"]) for row in csv.DictReader(f)] == [0, 1, 2, 3]
+        assert [int(row["step"]) for row in csv.DictReader(f)] == [0, 1, 2, 3, 4]
     assert len(list((tmp_path / "run/logs/tensorboard/summary").glob("events.out.tfevents.*"))) == 1
     with pytest.raises(ValueError, match="cycles"):
         bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, cycles=2, **FAST)
@@ -187,7 +188,7 @@ def test_drift_guard_rolls_back_a_stage_that_worsens_the_image_evidence(tiny_sce
     monkeypatch.setattr(runner_module, "photo_error", lambda *a, **k: next(photo))
     monkeypatch.setattr(runner_module, "pose_track_error", lambda *a, **k: next(tracks))
     result = bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, drift_guard="rollback",
-                       drift_tolerance=0.1, **FAST)  # fmt: skip
+                       drift_tolerance=0.1, zoom={"method": "off"}, **FAST)  # fmt: skip
     assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1"]
     assert result.history[-1]["rolled_back"] and result.poses is None
     assert torch.equal(result.scene.joints3d, tiny_scene.joints3d)  # the pose stage's output discarded
@@ -217,7 +218,8 @@ def test_stage_records_hold_the_image_evidence(tiny_scene, tmp_path):
     from lit_boot.bootstrap.evaluate import photo_error, pose_track_error
 
     result = bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, cycles=0, **FAST)
-    initial, flow_1 = result.history
+    initial, zoom, flow_1 = result.history
+    assert 0 < zoom["photo_error"] <= initial["photo_error"]  # kept only where the frames confirm it
     assert 0 < flow_1["photo_error"] < 48 and 0 < initial["track_error"] < 48
     # the GT flow explains the frames better than zero motion, the GT joint tracks better than
     # the same tracks with 2 px of jitter
@@ -235,8 +237,8 @@ def test_2d_mode_with_a_flow_ensemble(tiny_scene, tmp_path):
                        flow_ensemble=[{"lr": 1e-4}], **FAST)  # fmt: skip
     assert result.poses.mode == "2d" and result.poses.keypoints2d.shape == (4, 17, 2)
     assert (tmp_path / "run/raft_finetuned.pt").is_file() and (tmp_path / "run/raft_finetuned_m1.pt").is_file()
-    record = result.history[1]
-    assert record["kind"] == "flow" and "kp2d_px" in result.history[2]
+    zoom, record = result.history[1:3]
+    assert zoom["kind"] == "zoom" and record["kind"] == "flow" and "kp2d_px" in result.history[3]
 
 
 def test_the_flow_ensemble_averages_every_members_flow(tiny_scene, tmp_path, monkeypatch):
@@ -274,7 +276,7 @@ def test_demo_runs_the_method_and_a_rerun_resumes(shared, tmp_path, capsys, monk
     args = ["demo", "--out", str(tmp_path / "demo"), "--frames", "2", "--height", "64", "--width", "96", "--epochs", "1"]
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "| epe_person |" in out and "| mpjpe_mm |" in out and "stage 3/3 flow_2" in out
+    assert "| epe_person |" in out and "| mpjpe_mm |" in out and "stage 4/4 flow_2" in out
     assert (tmp_path / "demo/bootstrap/summary.json").is_file()
     assert main(args) == 0  # resumes: every stage is loaded, none runs
-    assert "stage 1/3" not in capsys.readouterr().out
+    assert "stage 1/4" not in capsys.readouterr().out

@@ -18,12 +18,17 @@ from typing import Any
 from .options import FlowOptions, PoseOptions, check_options
 
 
-__all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "SELF_CHECKS", "SelfCheckConfig", "BootstrapConfig"]
+__all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "SELF_CHECKS", "ZOOMS", "SelfCheckConfig", "ZoomConfig", "BootstrapConfig"]
 
 MODES = ("3d", "2d")  # lit_boot.core.POSE_MODES, literal here: the CLI reads this module without torch
 DRIFT_GUARDS = ("record", "stop", "rollback")
 #: The flow stages' self-check against the frames (see :mod:`lit_boot.bootstrap.selfcheck`).
 SELF_CHECKS = ("off", "photometric")
+#: The zoom stage (see :mod:`lit_boot.bootstrap.zoom`): off, or RAFT zoomed on the person.
+ZOOMS = ("off", "person")
+#: What the flow stages learn from the zoom: nothing (off), its flow as the base the stick-man is
+#: painted over (base), or that and its confirmed pixels painted instead of the stick-man (confirmed).
+ZOOM_TEACHING = ("off", "base", "confirmed")
 
 #: The default preset's fast fine-tune (issue 15): see lit_boot.flow.warm.
 FAST_FLOW: dict[str, Any] = {"train_parts": "update_block", "warm_start": True, "train_updates": 2, "crop_margin": 24,
@@ -43,7 +48,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                     "train_updates": 20, "freeze_batchnorm": False, "lr": 1e-5},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
-        "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off"},
+        "options": {"scale_footprint": False, "cuda_precision": "16-mixed", "self_check": "off", "zoom": "off"},
     },
     "default": {
         # the paper's text instead of its code where they differ: a cross of radius 15 px at a
@@ -55,7 +60,8 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         # sketch's pixels weigh 5x in a SmoothL1 with beta 0.1, the unpainted ones within 2
         # footprint radii of it not at all (they may be the limb's: sketch_gap); in 2D (50
         # epochs) the fit stops when its loss stops falling (3 epochs without a 2% fall) and
-        # backpropagates through the last update only. Everything else as paper.
+        # backpropagates through the last update only; before the flow stages, the zoom stage
+        # refines RAFT's flow where the person is (ZoomConfig). Everything else as paper.
         # (BENCHMARKS.md, "Speed", "Do no harm" and "The unknown zone")
         "flow_3d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
                     "sketch_weight": 5.0, "loss_beta": 0.1},
@@ -64,7 +70,8 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                     "grad_updates": 1},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
-        "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric"},
+        "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric",
+                    "zoom": "person"},
     },
 }  # fmt: skip
 
@@ -113,6 +120,78 @@ class SelfCheckConfig:
         for name, least in (("tile", 1), ("window", 1), ("blend", 0)):
             if getattr(self, name) < least:
                 raise ValueError(f"self_check.{name}: expected >= {least} px, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ZoomConfig:
+    """The zoom stage: RAFT on a zoomed crop around the person, kept where the frames confirm it
+    (:mod:`lit_boot.bootstrap.zoom`, :mod:`lit_boot.flow.zoom`).
+
+    Args:
+        method: None (the preset's: person in default, off in paper), off, or person.
+        max_scale: the largest upsampling of the crop.
+        min_scale: a pair whose scale would be below this is not zoomed (too little to gain).
+        reach_px: the largest zoomed motion, px: the scale is at most reach_px / the 95th
+            percentile of RAFT's flow magnitude on the person's box (a zoomed displacement
+            beyond RAFT's reach is a failure, not a refinement).
+        context: the crop's margin around the person's box, as a fraction of its larger side.
+        min_context_px: the smallest margin, px.
+        border_px: the zoomed flow along the crop's inner edges (no context there) is not used.
+        updates: RAFT iterations on the zoomed crop.
+        max_change_px: the zoomed flow is kept only where it moves RAFT's flow by less than
+            this, px (8: one cell of RAFT's grid): a refinement, not another match.
+        window: the box (px) over which each pixel's census errors are averaged.
+        margin: how much lower (a fraction of RAFT's) the zoomed flow's averaged error must be;
+            the pixel's own error must be lower too.
+        teach: what the flow stages' fine-tune learns from the zoom: off, base (the stick-man is
+            painted over the zoom stage's flow instead of RAFT's) or confirmed (that, and where
+            the zoomed flow was kept it is the target instead of the stick-man).
+    """
+
+    method: str | None = None
+    max_scale: float = 2.0
+    min_scale: float = 1.25
+    reach_px: float = 60.0
+    context: float = 0.25
+    min_context_px: int = 16
+    border_px: int = 8
+    updates: int = 12
+    max_change_px: float = 8.0
+    window: int = 5
+    margin: float = 0.02
+    teach: str = "confirmed"
+
+    def __post_init__(self) -> None:
+        if self.teach not in ZOOM_TEACHING:
+            raise ValueError(f"zoom.teach: expected one of {ZOOM_TEACHING}, got {self.teach!r}")
+        if self.method not in (None, *ZOOMS):
+            raise ValueError(f"zoom.method: expected one of {(None, *ZOOMS)}, got {self.method!r}")
+        if not 1.0 <= self.min_scale <= self.max_scale:
+            raise ValueError(f"zoom.min_scale / zoom.max_scale: expected 1 <= min_scale <= max_scale, "
+                             f"got {self.min_scale} / {self.max_scale}")  # fmt: skip
+        for name in ("reach_px", "max_change_px", "context"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"zoom.{name}: expected > 0, got {getattr(self, name)}")
+        for name, least in (("min_context_px", 0), ("border_px", 0), ("updates", 1), ("window", 1)):
+            if getattr(self, name) < least:
+                raise ValueError(f"zoom.{name}: expected >= {least}, got {getattr(self, name)}")
+        if not 0 <= self.margin < 1:
+            raise ValueError(f"zoom.margin: expected 0 <= margin < 1, got {self.margin}")
+
+
+def _nested(name: str, value: Any, kind: type) -> Any:
+    """``value`` as a ``kind`` dataclass (a dict of its fields is taken); ValueError naming
+    ``name`` otherwise."""
+    fields = kind.__dataclass_fields__
+    if isinstance(value, dict):
+        unknown = sorted(set(value) - set(fields))
+        if unknown:
+            raise ValueError(f"{name}: unknown key {unknown[0]!r}; expected some of {list(fields)}")
+        value = kind(**value)
+    if not isinstance(value, kind):
+        raise ValueError(f"{name}: expected a {kind.__name__} or a dict of its fields ({', '.join(fields)}), "
+                         f"got {value!r}")
+    return value
 
 
 def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
@@ -167,8 +246,11 @@ class BootstrapConfig:
         video: write overlay.mp4.
         progress_bar: Lightning's progress bars.
         self_check: after each flow stage, without ground truth: keep the tuned flow only where
-            the frames say it beats the initial flow (:class:`SelfCheckConfig`: ``method``
-            None is the preset's; a dict of its fields is taken too).
+            the frames say it beats the flow it started from (:class:`SelfCheckConfig`:
+            ``method`` None is the preset's; a dict of its fields is taken too).
+        zoom: before the flow stages, RAFT on a zoomed crop around the person, kept where the
+            frames confirm it (:class:`ZoomConfig`: ``method`` None is the preset's; a dict of
+            its fields is taken too).
         seed: seed_everything before each stage (the same run gives the same result).
     """
 
@@ -192,18 +274,12 @@ class BootstrapConfig:
     video: bool = True
     progress_bar: bool = True
     self_check: SelfCheckConfig = field(default_factory=SelfCheckConfig)
+    zoom: ZoomConfig = field(default_factory=ZoomConfig)
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if isinstance(self.self_check, dict):
-            unknown = sorted(set(self.self_check) - set(SelfCheckConfig.__dataclass_fields__))
-            if unknown:
-                raise ValueError(f"self_check: unknown key {unknown[0]!r}; expected some of "
-                                 f"{list(SelfCheckConfig.__dataclass_fields__)}")
-            self.self_check = SelfCheckConfig(**self.self_check)
-        if not isinstance(self.self_check, SelfCheckConfig):
-            raise ValueError(f"self_check: expected a SelfCheckConfig or a dict of its fields "
-                             f"({', '.join(SelfCheckConfig.__dataclass_fields__)}), got {self.self_check!r}")
+        self.self_check = _nested("self_check", self.self_check, SelfCheckConfig)
+        self.zoom = _nested("zoom", self.zoom, ZoomConfig)
         checks = [("mode", MODES), ("preset", tuple(PRESETS)), ("drift_guard", DRIFT_GUARDS),
                   ("flow_format", ("flo", "npz"))]
         for name, allowed in checks:
@@ -228,8 +304,8 @@ class BootstrapConfig:
         return self.flow_epochs if self.flow_epochs is not None else (8 if self.mode == "3d" else 50)
 
     def stages(self) -> list[str]:
-        """Stage names in order: flow_1, pose_1, flow_2, ..."""
-        names = ["flow_1"]
+        """Stage names in order: zoom (when on), flow_1, pose_1, flow_2, ..."""
+        names = ["zoom", "flow_1"] if self.zooming != "off" else ["flow_1"]
         for c in range(1, self.cycles + 1):
             names += [f"pose_{c}", f"flow_{c + 1}"]
         return names
@@ -242,6 +318,12 @@ class BootstrapConfig:
         """The self-check the flow stages use: ``self_check.method``, or the preset's when None."""
         method = self.self_check.method
         return method if method is not None else self.option("self_check")
+
+    @property
+    def zooming(self) -> str:
+        """The zoom stage's method: ``zoom.method``, or the preset's when None."""
+        method = self.zoom.method
+        return method if method is not None else self.option("zoom")
 
     def flow_kwargs(self, member: int = 0, person_px: float | None = None) -> dict[str, Any]:
         """FlowTTT arguments for ensemble member ``member`` (0: ``flow``), the preset's

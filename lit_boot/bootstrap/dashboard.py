@@ -36,6 +36,6 @@ def log_stage_images(
     for logger in tensorboards:
         logger.experiment.add_image(f"flow/{stage}", flow_image(flows[t].float()), step)
         logger.experiment.add_image(f"skeleton/{stage}", skeleton, step)
-        if decisions is not None and stage.startswith("flow"):
+        if decisions is not None and stage.startswith(("flow", "zoom")):
             image = decision_image(scene.frames[t], decisions["painted"][t], decisions["kept"][t])
             logger.experiment.add_image(f"decisions/{stage}", image, step)

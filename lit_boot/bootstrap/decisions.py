@@ -49,6 +49,14 @@ def decision_summary(history: list[dict[str, Any]]) -> list[dict[str, Any]]:
     self-check; 1.0 without one), ``rolled_back`` and the guard that acted, if any."""
     out = []
     for record in history:
+        if record.get("kind") == "zoom":
+            zoom = record.get("info", {}).get("zoom", {})
+            out.append({"stage": record["stage"], "painted_fraction": 0.0, "gate_kept_fraction": 1.0,
+                        "bones_rejected": 0.0, "kept_tuned_fraction": zoom.get("kept_fraction", 0.0),
+                        "person_tuned_fraction": zoom.get("kept_fraction", 0.0),
+                        "rolled_back": bool(record.get("rolled_back", False)),
+                        "guard": record.get("guard", {}).get("guard")})  # fmt: skip
+            continue
         if record.get("kind") != "flow":
             continue
         info = record.get("info", {})

@@ -1,6 +1,6 @@
 """The drift guard: after each stage, did the stage make its image evidence worse?
 
-A flow stage is judged by its flow's ``photo_error`` (the mean census error of frame t against
+A flow stage (and the zoom stage) is judged by its flow's ``photo_error`` (the mean census error of frame t against
 frame t+1 warped by the flow), a pose stage by its poses' ``track_error`` (the mean census
 distance along the joint tracks); see :mod:`lit_boot.bootstrap.evaluate`. Each is compared
 with the last kept stage that has the same figure. Neither needs ground truth. (The flow-pose
@@ -20,7 +20,7 @@ def drift_guard(config: BootstrapConfig, record: dict[str, Any], history: list[d
     """The guard's event for a finished stage's ``record`` (None when the evidence did not get
     worse by more than ``config.drift_tolerance``, a fraction, or when the guard only records):
     ``{"guard": "drift", "evidence": key, "before": x, "after": y, "action": stop | rollback}``."""
-    key = "photo_error" if record["kind"] == "flow" else "track_error"
+    key = "photo_error" if record["kind"] in ("flow", "zoom") else "track_error"
     before = next((r[key] for r in reversed(history) if key in r and not r.get("rolled_back")), float("nan"))
     after = record[key]
     if config.drift_guard == "record" or not after > before * (1.0 + config.drift_tolerance):

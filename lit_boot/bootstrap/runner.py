@@ -63,6 +63,7 @@ from .outputs import write_outputs
 from .result import BootstrapResult
 from .selfcheck import check_stage, summary_line
 from .stages import fine_tune_flow, make_flow_model, predict_flows, quiet_refiner, refine_poses_stage
+from .zoom import box_masks, person_boxes, zoom_flows, zoom_line
 
 __all__ = ["Bootstrap", "BootstrapResult", "bootstrap", "STAGE_JSON"]
 
@@ -79,7 +80,8 @@ def _save_tensor(path: Path, state: dict[str, torch.Tensor]) -> None:
 class _RunState:
     """What a run carries from stage to stage: the current scene (its estimates the latest
     poses), flows (T-1, 2, H, W) px and PoseResult, the records so far, and the run's fixed
-    facts."""
+    facts. ``initial`` is pretrained RAFT's flow, ``reference`` the flow the flow stages start
+    from and are checked against (RAFT's, or the zoom stage's)."""
 
     scene: Scene
     initial_scene: Scene
@@ -88,6 +90,8 @@ class _RunState:
     precision: str
     loggers: list
     initial: torch.Tensor | None = None
+    reference: torch.Tensor | None = None
+    zoom_kept: torch.Tensor | None = None
     flows: torch.Tensor | None = None
     result: PoseResult | None = None
     history: list[dict[str, Any]] = field(default_factory=list)
@@ -198,11 +202,12 @@ class Bootstrap:
             model = self._model(m, st.person_px, fresh=cfg.restart_flow)
             loggers = self._loggers(name + (f"_m{m}" if n > 1 else ""))
             reports.append(fine_tune_flow(model, st.scene, mode=cfg.mode, epochs=cfg.epochs, accelerator=st.accelerator,
-                                          precision=st.precision, loggers=loggers, progress_bar=cfg.progress_bar))
+                                          precision=st.precision, loggers=loggers, progress_bar=cfg.progress_bar,
+                                          **self._teaching(st)))
             flows.append(predict_flows(model, st.scene, accelerator=st.accelerator, precision=st.precision))
         mean = torch.stack(flows).mean(0)
         person = person_region(self.models[0].sketch_masks)
-        mean, check, kept = check_stage(cfg, st.scene, st.initial, mean, person)
+        mean, check, kept = check_stage(cfg, st.scene, st.reference, mean, person)
         record = {**scene_flow_metrics(st.scene.gt, mean), "drift_px": drift(mean, st.initial, person),
                   "agreement_px": agreement(mean, *st.scene.pose_points(cfg.mode)),
                   "photo_error": photo_error(st.scene.frames, mean),
@@ -216,6 +221,34 @@ class Bootstrap:
             log.info(summary_line(check))
         kept = kept if kept is not None else torch.ones(mean.shape[0], *mean.shape[-2:])
         return record, mean, {"painted": self.models[0].sketch_masks.cpu(), "kept": kept}
+
+    def _teaching(self, st: _RunState) -> dict[str, torch.Tensor | None]:
+        """What a flow stage learns from the zoom stage (``zoom.teach``): fine_tune_flow's
+        ``teacher`` and ``confirmed``."""
+        teach = self.config.zoom.teach if st.zoom_kept is not None else "off"
+        return {"teacher": st.reference if teach != "off" else None,
+                "confirmed": st.zoom_kept if teach == "confirmed" else None}
+
+    def _zoom_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], torch.Tensor, dict]:
+        """RAFT (ensemble member 0, pretrained) on a zoomed crop around the person of every pair,
+        kept where the frames confirm it (:mod:`~lit_boot.bootstrap.zoom`); the record, the flows
+        (T-1, 2, H, W) px and the decision maps (nothing painted; kept: the zoomed flow's)."""
+        cfg = self.config
+        log.info(stage_header(index, len(cfg.stages()), name, f"RAFT zoomed on the person, on {st.accelerator}"))
+        raft = self._model(0, st.person_px).raft
+        device = next(raft.parameters()).device
+        raft.to("cuda" if st.accelerator == "cuda" else "cpu")
+        boxes = person_boxes(st.scene, cfg.mode)
+        try:
+            flows, kept, zoom = zoom_flows(raft, st.scene, st.initial, boxes, cfg.zoom)
+        finally:
+            raft.to(device)
+        person = box_masks(boxes, tuple(flows.shape[-2:]))
+        record = {**scene_flow_metrics(st.scene.gt, flows), "drift_px": drift(flows, st.initial, person),
+                  "agreement_px": agreement(flows, *st.scene.pose_points(cfg.mode)),
+                  "photo_error": photo_error(st.scene.frames, flows), "info": {"zoom": zoom}}  # fmt: skip
+        log.info(zoom_line(zoom, flows.shape[0]))
+        return record, flows, {"painted": torch.zeros_like(kept), "kept": kept.float()}
 
     def _pose_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], PoseResult, Scene]:
         """Refine the current poses against the current flows; the record, the result and the
@@ -261,7 +294,7 @@ class Bootstrap:
             folder.mkdir(parents=True, exist_ok=True)
             write_flows_npz(folder / "flows.npz", st.initial)
             self.folder.write_record("initial", record)
-        st.flows = st.initial
+        st.flows = st.reference = st.initial
         st.history.append(record)
         st.seconds["initial"] = record["info"]["seconds"]
         log_stage_images(st.loggers, 0, "initial", st.scene, st.initial, cfg.mode)
@@ -272,10 +305,13 @@ class Bootstrap:
         if record.get("rolled_back"):
             return False
         folder = self.folder.stage_dir(name)
-        if record["kind"] == "flow":
+        if record["kind"] in ("flow", "zoom"):
             st.flows = read_flows(folder / "flows.npz")
             st.decisions = load_decisions(folder / "decisions.npz") if (folder / "decisions.npz").is_file() else None
-            self.pending_weights = [folder / f"raft_{m}.pt" for m in range(len(self.models))]
+            if record["kind"] == "zoom":
+                st.reference, st.zoom_kept = st.flows, st.decisions["kept"] > 0
+            else:
+                self.pending_weights = [folder / f"raft_{m}.pt" for m in range(len(self.models))]
         else:
             st.result = load_pose_result(folder)
             st.scene = st.result.apply_to(st.scene)
@@ -286,13 +322,17 @@ class Bootstrap:
     def _run_stage(self, st: _RunState, index: int, name: str) -> bool:
         """Run a stage; save its results, stage.json last; False if the run stops here."""
         cfg = self.config
-        kind, cycle = name.split("_")[0], int(name.split("_")[1])
+        kind, _, cycle = name.partition("_")
+        cycle = int(cycle or 0)
         head = {"stage": name, "kind": kind, "cycle": cycle}
         L.seed_everything(cfg.seed + index, verbose=False)
         start = time.perf_counter()
         try:
             if kind == "flow":
                 record, flows, decisions = self._flow_stage(name, index, st)
+                scene, result = st.scene, st.result
+            elif kind == "zoom":
+                record, flows, decisions = self._zoom_stage(name, index, st)
                 scene, result = st.scene, st.result
             else:
                 record, result, scene = self._pose_stage(name, index, st)
@@ -313,6 +353,8 @@ class Bootstrap:
         self._save_stage(name, kind, flows, result, decisions)
         self.folder.write_record(name, record)
         st.flows, st.scene, st.result, st.decisions = flows, scene, result, decisions
+        if kind == "zoom":
+            st.reference, st.zoom_kept = flows, decisions["kept"] > 0
         st.history.append(record)
         st.seconds[name] = record["info"]["seconds"]
         log_stage_images(st.loggers, index, name, st.scene, st.flows, cfg.mode, st.decisions)
@@ -335,10 +377,10 @@ class Bootstrap:
         """A finished stage's results (each file atomic): flows, weights and decision maps, or the poses."""
         folder = self.folder.stage_dir(name)
         folder.mkdir(parents=True, exist_ok=True)
-        if kind == "flow":
+        if kind in ("flow", "zoom"):
             write_flows_npz(folder / "flows.npz", flows)
             save_decisions(folder / "decisions.npz", decisions["painted"], decisions["kept"])
-            for m, model in enumerate(self.models):
+            for m, model in enumerate(self.models if kind == "flow" else []):
                 _save_tensor(folder / f"raft_{m}.pt", model.raft.state_dict())
         else:
             result.save(folder)

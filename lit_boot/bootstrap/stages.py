@@ -93,13 +93,19 @@ def fine_tune_flow(
     precision: str,
     loggers: list,
     progress_bar: bool = True,
+    teacher: torch.Tensor | None = None,
+    confirmed: torch.Tensor | None = None,
 ) -> dict[str, float]:
     """Fine-tune ``model`` in place on the stick-man from ``scene``'s current poses; returns
     FlowTTT's target report (bones rejected by the guard, painted fraction, ...) with
     ``train/epochs``, the epochs run (fewer than ``epochs`` when the plateau stop ended the fit).
-    A non-finite value raises NonFiniteError (the model holds the last good step's weights)."""
+    With a ``teacher`` flow (T-1, 2, H, W) px the stick-man is painted over it, and not where
+    ``confirmed`` (T-1, H, W) bool (:meth:`FlowTTT.prepare`). A non-finite value raises
+    NonFiniteError (the model holds the last good step's weights)."""
     model.forget_targets()  # rebuilt from these poses
     data = SceneFlowData(scene, pose_source=SOURCE_OF_MODE[mode])
+    if teacher is not None:
+        model.prepare(scene, data.sketch_inputs(), teacher=teacher, confirmed=confirmed)
     trainer = _flow_trainer(max_epochs=epochs, accelerator=accelerator, precision=precision, loggers=loggers,
                             progress_bar=progress_bar)  # fmt: skip
     trainer.fit(model, datamodule=data)

@@ -15,7 +15,7 @@ weight, with the weights of the last good step restored (:class:`~lit_boot.finit
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import lightning as L
 import torch
@@ -182,22 +182,32 @@ class FlowTTT(L.LightningModule):
         return base, self._predict_all(scene, updates, backward=True)
 
     @torch.no_grad()
-    def prepare(self, scene: Scene, inputs: SketchInputs | None = None) -> dict[str, float]:
+    def prepare(self, scene: Scene, inputs: SketchInputs | None = None, *, teacher: torch.Tensor | None = None,
+                confirmed: torch.Tensor | None = None) -> dict[str, float]:  # fmt: skip
         """Base flows, sketches and targets for every pair of ``scene``, the stick-man drawn from
         ``inputs`` (default: :func:`~lit_boot.flow.data.sketch_inputs` of the scene); sets and
         returns ``target_report`` (see :meth:`targets_from`). A fit calls it from its
-        SceneFlowData unless the module holds targets."""
-        self.target_report = self.targets_from(scene, *self.base_flows(scene), inputs=inputs)
+        SceneFlowData unless the module holds targets. ``teacher`` (P, 2, H, W) px: the flow the
+        stick-man is painted over instead of RAFT's own (the zoom stage's, which the frames
+        confirmed); ``confirmed`` (P, H, W) bool: where the teacher is confirmed, it is painted
+        instead of the stick-man (which says where a limb is; the teacher says how it moved)."""
+        base, base_bw = self.base_flows(scene)
+        if teacher is not None:
+            if teacher.shape != base.shape:
+                raise ValueError(f"teacher: expected shape {tuple(base.shape)}, got {tuple(teacher.shape)}")
+            base = teacher.float()
+        self.target_report = self.targets_from(scene, base, base_bw, inputs=inputs, confirmed=confirmed)
         return self.target_report
 
     @torch.no_grad()
     def targets_from(self, scene: Scene, base: torch.Tensor, base_bw: torch.Tensor | None = None, *,
-                     inputs: SketchInputs | None = None) -> dict[str, float]:  # fmt: skip
+                     inputs: SketchInputs | None = None, confirmed: torch.Tensor | None = None) -> dict[str, float]:  # fmt: skip
         """Sketch, gate and set the targets of ``scene`` over given base flows (P, 2, H, W) px (and
-        the backward ones for the fb gate). Returns a report: bones rejected by the guard, the
-        gate's counts (target/gate_*, see :data:`~lit_boot.flow.gate.GATE_REPORT_KEYS`), the
-        painted fraction after both and, with GT flow, the sketch's and the base flow's EPE on
-        the painted pixels."""
+        the backward ones for the fb gate); where ``confirmed`` (P, H, W) bool, the base itself is
+        painted instead of the sketch (it counts as painted: weighted and cropped like the sketch).
+        Returns a report: bones rejected by the guard, the gate's counts (target/gate_*, see
+        :data:`~lit_boot.flow.gate.GATE_REPORT_KEYS`), the painted fraction after both and, with
+        GT flow, the sketch's and the base flow's EPE on the painted pixels."""
         inputs = inputs if inputs is not None else sketch_inputs(scene)
         frames = scene.frames
         if tuple(base.shape) != (frames.shape[0] - 1, 2, *frames.shape[-2:]):
@@ -210,6 +220,10 @@ class FlowTTT(L.LightningModule):
             depths=inputs.depths, base_flow=base, config=self.sketch_config,
         )  # fmt: skip
         sketch, gated = gate_sketch(frames[:-1], frames[1:], base, sketch, self.sketch_config, base_bw)
+        if confirmed is not None:  # the base (the teacher) is confirmed there: it is the target, not the sketch
+            confirmed = confirmed.to(sketch.mask.device)
+            sketch = replace(sketch, mask=sketch.mask | confirmed,
+                             flow=torch.where(confirmed[:, None], base.to(sketch.flow), sketch.flow))
         self.targets, self.sketch_masks, self.scene = target_flow(base, sketch), sketch.mask, scene
         report = {f"target/rejected_{k}": float(v) for k, v in sketch.rejected.items()}
         report.update({f"target/{k}": v for k, v in gated.items()})

@@ -1,0 +1,114 @@
+"""The zoom stage: RAFT's flow refined where the person is, kept only where the frames confirm it.
+
+After the initial stage (pretrained RAFT on every pair), each pair with a person is run again on
+a crop around the person's box, zoomed (:mod:`lit_boot.flow.zoom`: the scale chosen from the
+motion). The zoomed flow replaces RAFT's pixel by pixel where both hold:
+
+- it refines RAFT's flow: it moves it by less than ``max_change_px`` (a large change is another
+  match, which the frames cannot be trusted to judge: fog, blur and fast motion fool them);
+- the frames say it is better: its census error averaged over a ``window`` box is below
+  ``(1 - margin)`` x RAFT's, and the pixel's own error is lower too (the self-check's person rule,
+  :func:`~lit_boot.bootstrap.selfcheck.choose_pixels`).
+
+The result is the flow the flow stages start from and are checked against. The person's box per
+frame: the scene's ``person_boxes`` when it has them (a person detector), else the box around
+the pose's points (:func:`~lit_boot.flow.zoom.boxes_from_points`).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import torch
+from torch import Tensor
+from torchvision.models.optical_flow import RAFT
+
+from ..core import Scene
+from ..flow.evidence import photometric_error
+from ..flow.zoom import boxes_from_points, pair_boxes, refines, zoom_pair
+from .config import ZoomConfig
+from .selfcheck import CENSUS_RADIUS, choose_pixels
+
+__all__ = ["person_boxes", "box_masks", "zoom_flows", "zoom_line"]
+
+
+def person_boxes(scene: Scene, mode: str) -> Tensor:
+    """The person's box per frame (T, 5) (x0, y0, x1, y1, score; score 0: nobody): the scene's
+    ``person_boxes`` when it has them, else around the pose points of ``mode``."""
+    boxes = getattr(scene, "person_boxes", None)
+    if boxes is not None:
+        return boxes.float()
+    return boxes_from_points(*scene.pose_points(mode))
+
+
+def box_masks(boxes: Tensor, size: tuple[int, int]) -> Tensor:
+    """(T-1, H, W) bool: each pair's person box (:func:`~lit_boot.flow.zoom.pair_boxes` of
+    ``boxes`` (T, 5)) as a mask of a frame of ``size`` (H, W): where the zoom stage acts."""
+    height, width = size
+    masks = torch.zeros(boxes.shape[0] - 1, height, width, dtype=torch.bool)
+    for t, box in enumerate(pair_boxes(boxes)):
+        if box is not None:
+            x0, y0, x1, y1 = box.tolist()
+            masks[t, max(0, round(y0)) : max(0, round(y1) + 1), max(0, round(x0)) : max(0, round(x1) + 1)] = True
+    return masks
+
+
+def _keep(frames: Tensor, base: Tensor, candidate: Tensor, region: tuple[int, int, int, int],
+          config: ZoomConfig) -> Tensor:  # fmt: skip
+    """(H, W) bool: the region's pixels where the candidate (2, H, W) refines ``base`` and the
+    frames (2, 3, H, W) confirm it (see the module doc)."""
+    height, width = base.shape[-2:]
+    y0, y1, x0, x1 = region
+    reach = CENSUS_RADIUS + config.window // 2 + 1  # the window's context around the region
+    box = (max(0, y0 - reach), min(height, y1 + reach), max(0, x0 - reach), min(width, x1 + reach))
+    by0, by1, bx0, bx1 = box
+    pair = frames[:1], frames[1:]
+    err_b, valid_b = photometric_error(*pair, base[None].float(), radius=CENSUS_RADIUS, box=box)
+    err_z, valid_z = photometric_error(*pair, candidate[None].float(), radius=CENSUS_RADIUS, box=box)
+    select = torch.zeros(by1 - by0, bx1 - bx0, dtype=torch.bool)
+    select[y0 - by0 : y1 - by0, x0 - bx0 : x1 - bx0] = True
+    select &= refines(base[:, by0:by1, bx0:bx1], candidate[:, by0:by1, bx0:bx1], config.max_change_px)
+    won = choose_pixels(err_b[0], err_z[0], (valid_b & valid_z)[0], select, window=config.window,
+                        margin=config.margin, own=True)  # fmt: skip
+    keep = torch.zeros(height, width, dtype=torch.bool)
+    keep[by0:by1, bx0:bx1] = won
+    return keep
+
+
+def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: ZoomConfig) -> tuple[Tensor, Tensor, dict[str, Any]]:
+    """The zoom of every pair of ``scene``: ``base`` (T-1, 2, H, W) px RAFT's own flows, ``boxes``
+    (T, 5) the person's. Returns (flows (T-1, 2, H, W) px: ``base`` with the zoomed flow where
+    it was kept, kept (T-1, H, W) bool, record). The record: ``kept_fraction`` (of all pixels),
+    ``zoomed_pairs``, ``cost`` (zoomed pixels over the frames', summed over pairs: the zoom's
+    cost in RAFT passes), ``seconds`` and ``per_pair`` (scale, motion px, crop, region, cost,
+    kept fraction of the region)."""
+    start = time.perf_counter()
+    frames, flows = scene.frames, base.clone()
+    kept = torch.zeros(base.shape[0], *base.shape[-2:], dtype=torch.bool)
+    per_pair = []
+    for t, box in enumerate(pair_boxes(boxes)):
+        zoomed = zoom_pair(model, frames[t], frames[t + 1], base[t], box, max_scale=config.max_scale,
+                           min_scale=config.min_scale, reach_px=config.reach_px, context=config.context,
+                           min_context_px=config.min_context_px, border_px=config.border_px,
+                           updates=config.updates)  # fmt: skip
+        record = zoomed.record()
+        if zoomed.region is not None:
+            kept[t] = _keep(frames[t : t + 2], base[t], zoomed.candidate, zoomed.region, config)
+            flows[t] = torch.where(kept[t], zoomed.candidate, base[t])
+            y0, y1, x0, x1 = zoomed.region
+            record["kept_fraction"] = round(float(kept[t, y0:y1, x0:x1].float().mean()), 4)
+        per_pair.append(record)
+    record = {"kept_fraction": float(kept.float().mean()),
+              "zoomed_pairs": sum(p["region"] is not None for p in per_pair),
+              "cost": round(sum(p["cost"] for p in per_pair), 4), "seconds": time.perf_counter() - start,
+              "per_pair": per_pair}  # fmt: skip
+    return flows, kept, record
+
+
+def zoom_line(record: dict[str, Any], pairs: int) -> str:
+    """One line for the console: how many pairs were zoomed, at which scales, what was kept."""
+    scales = [p["scale"] for p in record["per_pair"] if p["region"] is not None]
+    at = f" at {min(scales):.2f}-{max(scales):.2f}x" if scales else ""
+    return (f"  zoom: {record['zoomed_pairs']} of {pairs} pairs zoomed{at} (cost {record['cost']:.1f} RAFT passes); "
+            f"the zoomed flow kept on {100 * record['kept_fraction']:.1f}% of the pixels, RAFT's elsewhere")

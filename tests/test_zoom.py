@@ -1,0 +1,208 @@
+"""The zoom: RAFT on a zoomed crop around the person (lit_boot.flow.zoom) and the zoom stage that
+keeps it where the frames confirm it (lit_boot.bootstrap.zoom)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+import lit_boot
+from lit_boot.bootstrap import BootstrapConfig, bootstrap
+from lit_boot.bootstrap.config import ZoomConfig
+from lit_boot.bootstrap.zoom import _keep, box_masks, person_boxes, zoom_flows
+from lit_boot.flow import zoom as flow_zoom
+from lit_boot.flow.zoom import boxes_from_points, pair_boxes, paste_region, refines, zoom_crop, zoom_pair, zoom_scale
+
+RANDOM_RAFT = {"weights": None, "train_updates": 2, "predict_updates": 3}
+FAST = dict(flow_epochs=1, pose_steps=15, progress_bar=False, video=False)
+ZOOM = dict(max_scale=2.0, min_scale=1.25, reach_px=60.0, context=0.25, min_context_px=16, border_px=8, updates=12)
+
+
+def test_boxes_from_points_bound_the_counted_points_and_mark_nobody():
+    points = torch.tensor([[[10.0, 20.0], [30.0, 5.0], [99.0, 99.0]], [[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]])
+    keep = torch.tensor([[True, True, False], [True, False, False]])
+    boxes = boxes_from_points(points, keep)
+    assert boxes[0].tolist() == [10.0, 5.0, 30.0, 20.0, 1.0]  # the third point does not count
+    assert boxes[1].tolist() == [0.0] * 5  # one point: nobody
+
+
+def test_pair_boxes_hold_both_frames_boxes_or_the_one_found():
+    boxes = torch.tensor([[10.0, 10, 20, 30, 1], [15, 5, 40, 25, 1], [0, 0, 0, 0, 0], [0, 0, 0, 0, 0]])
+    pairs = pair_boxes(boxes)
+    assert pairs[0].tolist() == [10, 5, 40, 30]
+    assert pairs[1].tolist() == [15, 5, 40, 25]
+    assert pairs[2] is None
+
+
+def test_zoom_crop_adds_the_context_inside_the_frame():
+    box = torch.tensor([40.0, 10.0, 80.0, 110.0])  # 40 wide, 100 tall: margin 25 px
+    assert zoom_crop(box, (120, 200), context=0.25, min_context_px=16) == (0, 120, 15, 106)
+    small = torch.tensor([50.0, 50.0, 54.0, 54.0])  # margin at least 16 px
+    assert zoom_crop(small, (120, 200), context=0.25, min_context_px=16) == (34, 71, 34, 71)
+
+
+def test_the_scale_keeps_the_zoomed_motion_within_reach():
+    box = torch.tensor([0.0, 0.0, 9.0, 9.0])
+    base = torch.zeros(2, 10, 10)
+    base[0] = 10.0  # 10 px everywhere: 60 / 10 would allow 6x, capped at 2
+    assert zoom_scale(base, box, max_scale=2.0, min_scale=1.25, reach_px=60.0) == (2.0, 10.0)
+    base[0] = 40.0  # 60 / 40 = 1.5
+    assert zoom_scale(base, box, max_scale=2.0, min_scale=1.25, reach_px=60.0)[0] == pytest.approx(1.5)
+    base[0] = 55.0  # 60 / 55 < 1.25: not zoomed
+    assert zoom_scale(base, box, max_scale=2.0, min_scale=1.25, reach_px=60.0)[0] == 1.0
+    assert zoom_scale(torch.zeros(2, 10, 10), box, max_scale=2.0, min_scale=1.25, reach_px=60.0)[0] == 2.0
+
+
+def test_paste_region_drops_the_crops_inner_edges_only():
+    assert paste_region((0, 50, 30, 100), (50, 100), 8) == (0, 50, 38, 100)
+    assert paste_region((10, 40, 30, 70), (50, 100), 8) == (18, 32, 38, 62)
+
+
+def test_refines_is_a_change_below_the_limit():
+    base = torch.zeros(2, 1, 3)
+    zoomed = torch.tensor([[[3.0, 8.0, 0.0]], [[4.0, 0.0, 7.9]]])  # changes 5, 8, 7.9
+    assert refines(base, zoomed, 8.0).tolist() == [[True, False, True]]
+
+
+def test_the_zoomed_flow_is_scaled_back_to_the_frames_pixels(monkeypatch):
+    """A stand-in for RAFT that answers a constant flow at the size it is given: the crop's flow is
+    that flow divided by the zoom in each axis, at the crop's size."""
+    seen = {}
+
+    def fake_predict(model, a, b, updates):
+        seen["size"], seen["updates"] = tuple(a.shape[-2:]), updates
+        flow = torch.zeros(1, 2, *a.shape[-2:])
+        flow[:, 0], flow[:, 1] = 6.0, -4.0
+        return flow
+
+    monkeypatch.setattr(flow_zoom, "predict_flow", fake_predict)
+    frames = torch.zeros(2, 3, 100, 160, dtype=torch.uint8)
+    flow = flow_zoom.zoomed_flow(torch.nn.Linear(1, 1), frames[0], frames[1], (10, 60, 20, 120), 2.0, 7)
+    assert seen == {"size": (100, 200), "updates": 7}
+    assert flow.shape == (2, 50, 100)
+    assert torch.allclose(flow[0], torch.full((50, 100), 3.0)) and torch.allclose(flow[1], torch.full((50, 100), -2.0))
+
+
+def test_zoom_pair_pastes_the_zoomed_flow_into_its_region_only(monkeypatch):
+    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates: torch.ones(
+        2, crop[1] - crop[0], crop[3] - crop[2]))  # fmt: skip
+    frames = torch.zeros(2, 3, 120, 200, dtype=torch.uint8)
+    base = torch.zeros(2, 120, 200)
+    pair = zoom_pair(torch.nn.Linear(1, 1), frames[0], frames[1], base, torch.tensor([60.0, 40.0, 100.0, 80.0]), **ZOOM)
+    assert pair.scale == 2.0 and pair.crop == (24, 97, 44, 117) and pair.region == (32, 89, 52, 109)
+    y0, y1, x0, x1 = pair.region
+    assert (pair.candidate[:, y0:y1, x0:x1] == 1).all()
+    assert pair.candidate.sum() == 2 * (y1 - y0) * (x1 - x0)  # nothing outside the region
+    assert pair.cost == pytest.approx(73 * 73 * 4 / (120 * 200))
+    assert (base == 0).all()  # the input is not modified
+    # nobody, or a motion beyond reach: the base itself
+    assert zoom_pair(None, frames[0], frames[1], base, None, **ZOOM).region is None
+    fast = torch.full((2, 120, 200), 50.0)
+    assert zoom_pair(None, frames[0], frames[1], fast, torch.tensor([60.0, 40, 100, 80]), **ZOOM).region is None
+
+
+def _textured_pair(shift: int, frames: int = 2) -> torch.Tensor:
+    """Frames (frames, 3, 96, 128) uint8 of a smooth random texture (blobs of about 4 px), each
+    the previous one moved right by ``shift`` px."""
+    g = torch.Generator().manual_seed(0)
+    width = 128 + shift * (frames - 1)
+    coarse = torch.rand(1, 3, 24, width // 4 + 1, generator=g)
+    smooth = torch.nn.functional.interpolate(coarse, size=(96, width), mode="bicubic", align_corners=False)[0]
+    texture = (smooth.clamp(0, 1) * 255).to(torch.uint8)
+    start = shift * (frames - 1)
+    return torch.stack([texture[:, :, start - shift * t : start - shift * t + 128] for t in range(frames)])
+
+
+def test_the_stage_keeps_a_confirmed_refinement_and_refuses_a_large_change():
+    frames = _textured_pair(3)  # pixel x of frame 0 is at x + 3 in frame 1
+    truth = torch.zeros(2, 96, 128)
+    truth[0] = 3.0
+    base = truth.clone()
+    base[0, 20:70, 30:90] = 0.5  # RAFT's flow wrong on the person
+    region = (20, 70, 30, 90)
+    config = ZoomConfig()
+    keep = _keep(frames, base, truth, region, config)
+    assert keep[25:65, 40:80].float().mean() > 0.95  # confirmed by the frames, a change of 2.5 px
+    assert not keep[:20].any() and not keep[:, :30].any()  # only within the region
+    far = base.clone()
+    far[0, 20:70, 30:90] = 3.0 + 16.0  # no better, and a change of 18.5 px
+    assert not _keep(frames, base, far, region, config).any()
+    near = truth.clone()
+    near[0, 20:70, 30:90] = 2.0  # 1 px off
+    wrong = truth.clone()
+    wrong[0, 20:70, 30:90] = 0.0  # a small change (2 px) to a worse flow: the frames refuse it
+    assert _keep(frames, near, wrong, region, config)[25:65, 40:80].float().mean() < 0.05
+
+
+def test_zoom_flows_records_every_pair(monkeypatch):
+    frames = _textured_pair(3, frames=3)
+    scene = lit_boot.Scene(frames=frames)
+    base = torch.zeros(2, 2, 96, 128)
+    boxes = torch.tensor([[40.0, 30, 80, 60, 1], [40, 30, 80, 60, 1], [0, 0, 0, 0, 0]])
+    truth = torch.zeros(2, 96, 128)
+    truth[0] = 3.0
+    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates: truth[
+        :, crop[0] : crop[1], crop[2] : crop[3]])  # fmt: skip
+    flows, kept, record = zoom_flows(None, scene, base, boxes, ZoomConfig())
+    assert record["zoomed_pairs"] == 2 and len(record["per_pair"]) == 2
+    assert kept[0].any() and kept[1].any() and record["kept_fraction"] == pytest.approx(float(kept.float().mean()))
+    assert torch.equal(flows[kept[:, None].expand_as(flows)], truth.expand_as(flows)[kept[:, None].expand_as(flows)])
+    assert torch.equal(flows[~kept[:, None].expand_as(flows)], base[~kept[:, None].expand_as(flows)])
+    assert box_masks(boxes, (96, 128))[1, 30:61, 40:81].all() and not box_masks(boxes, (96, 128))[:, :30].any()
+
+
+def test_person_boxes_come_from_the_pose_when_the_scene_has_none():
+    scene = lit_boot.make_scene(motion="run", frames=3, height=64, width=96, seed=0)
+    boxes = person_boxes(scene, "2d")
+    points, keep = scene.pose_points("2d")
+    assert boxes.shape == (3, 5)
+    for t in range(3):
+        p = points[t][keep[t]]
+        assert boxes[t, :4].tolist() == pytest.approx([*p.min(0).values.tolist(), *p.max(0).values.tolist()])
+
+
+def test_config_turns_the_zoom_stage_on_in_the_default_preset_only():
+    assert BootstrapConfig().stages() == ["zoom", "flow_1", "pose_1", "flow_2"]
+    assert BootstrapConfig(preset="paper").stages() == ["flow_1", "pose_1", "flow_2"]
+    assert BootstrapConfig(zoom={"method": "off"}).stages() == ["flow_1", "pose_1", "flow_2"]
+    assert BootstrapConfig(preset="paper", zoom={"method": "person"}).zooming == "person"
+    with pytest.raises(ValueError, match="zoom.reach_px"):
+        BootstrapConfig(zoom={"reach_px": 0})
+    with pytest.raises(ValueError, match="zoom: unknown key 'scale'"):
+        BootstrapConfig(zoom={"scale": 2})
+    with pytest.raises(ValueError, match="zoom.teach"):
+        ZoomConfig(teach="sketch")
+
+
+def test_a_run_records_the_zoom_stage_and_resumes_past_it(tmp_path, monkeypatch):
+    scene = lit_boot.make_scene(motion="run", frames=3, height=64, width=96, seed=0)
+    result = bootstrap(scene, tmp_path / "run", flow=RANDOM_RAFT, cycles=0, **FAST)
+    zoom = result.history[1]
+    assert zoom["stage"] == "zoom" and zoom["kind"] == "zoom"
+    assert set(zoom["info"]["zoom"]) >= {"kept_fraction", "zoomed_pairs", "cost", "seconds", "per_pair"}
+    assert (tmp_path / "run/stages/zoom/flows.npz").is_file() and (tmp_path / "run/stages/zoom/decisions.npz").is_file()
+    from lit_boot.bootstrap import zoom as stage
+
+    monkeypatch.setattr(stage, "zoom_flows", lambda *a, **k: pytest.fail("a finished zoom stage ran again"))
+    again = bootstrap(scene, tmp_path / "run", flow=RANDOM_RAFT, cycles=0, **FAST)
+    assert torch.equal(again.flows, result.flows)
+
+
+def test_the_zoom_makes_rafts_flow_on_the_person_better(shared):
+    """Real RAFT-small on a synthetic scene with GT: the zoom stage lowers the person's EPE and
+    leaves the background no worse."""
+    scene = lit_boot.make_scene(motion="run", frames=3, height=128, width=256, seed=0)
+    model = lit_boot.flow.load_raft("raft_small", str(shared / "checkpoints/raft-small.pth"))
+    base = torch.stack([lit_boot.flow.predict_flow(model, scene.frames[t : t + 1], scene.frames[t + 1 : t + 2])[0]
+                        for t in range(2)])  # fmt: skip
+    flows, kept, _ = zoom_flows(model, scene, base, person_boxes(scene, "2d"), ZoomConfig())
+    gt = scene.gt
+    valid = gt.flow_mask()
+    person, background = valid & gt.person_mask[:-1], valid & ~gt.person_mask[:-1]
+
+    def epe(f, m):
+        return float((f - gt.flow).norm(dim=1)[m].mean())
+
+    assert kept.any()
+    assert epe(flows, person) < 0.9 * epe(base, person)
+    assert epe(flows, background) <= epe(base, background) * 1.01
