@@ -1,4 +1,4 @@
-"""Every ```python block of README.md runs as written, on tiny data.
+"""Every ```python block of README.md and of the docs pages (docs/*.md) runs as written, on tiny data.
 
 The blocks are found by parsing the markdown (one test per block, named after the heading
 above it) and run in-process, each in a fresh empty working directory. What a block names
@@ -31,6 +31,7 @@ from lit_boot.data.readers import PoseEstimates, save_poses
 from lit_boot.data import write_flows
 
 README = Path(__file__).resolve().parents[1] / "README.md"
+DOCS = sorted((README.parent / "docs").glob("*.md"))  # the docs site's pages (not the API reference)
 
 #: Frames of the tiny clip.mp4 (and of the DCPose / METRO files that must match it).
 CLIP_FRAMES = 2
@@ -39,11 +40,12 @@ CLIP_FRAMES = 2
 @dataclass(frozen=True)
 class Block:
     heading: str  # the nearest heading above the block
-    line: int  # README line of the block's first code line (1-based)
+    line: int  # the file's line of the block's first code line (1-based)
     code: str
+    source: Path = README  # the markdown file
 
 
-def python_blocks(text: str) -> list[Block]:
+def python_blocks(text: str, source: Path = README) -> list[Block]:
     """The ```python fenced blocks of a markdown text, with the heading above each."""
     blocks: list[Block] = []
     heading, fence, start, lines = "", None, 0, []
@@ -56,7 +58,7 @@ def python_blocks(text: str) -> list[Block]:
                 heading = line.lstrip("#").strip()
         elif line.strip() == fence[0]:
             if fence[1] in ("python", "py"):
-                blocks.append(Block(heading, start, "\n".join(lines) + "\n"))
+                blocks.append(Block(heading, start, "\n".join(lines) + "\n", source))
             fence = None
         else:
             lines.append(line)
@@ -67,13 +69,13 @@ def _slug(heading: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", heading.lower()).strip("-") or "top"
 
 
-BLOCKS = python_blocks(README.read_text(encoding="utf-8"))
+BLOCKS = [block for page in (README, *DOCS) for block in python_blocks(page.read_text(encoding="utf-8"), page)]
 
 
 def _ids(blocks: list[Block]) -> list[str]:
     ids: list[str] = []
     for block in blocks:
-        slug = _slug(block.heading)
+        slug = _slug(block.heading) if block.source == README else f"{block.source.stem}-{_slug(block.heading)}"
         ids.append(slug if slug not in ids else f"{slug}-{sum(i.startswith(slug) for i in ids) + 1}")
     return ids
 
@@ -159,7 +161,7 @@ def _params() -> list:
 
 
 def test_readme_has_python_blocks() -> None:
-    assert len(BLOCKS) >= 5, f"README.md: expected the Python examples, found {len(BLOCKS)} ```python blocks"
+    assert len(BLOCKS) >= 5, f"README.md + docs: expected the Python examples, found {len(BLOCKS)} ```python blocks"
     assert all(block.code.strip() for block in BLOCKS)
 
 
@@ -171,6 +173,6 @@ def test_readme_block_runs(block: Block, request, tmp_path, monkeypatch) -> None
     for path, build in PREPARE:
         if path in block.code and not Path(path).exists():
             build(Path(path))
-    # Line numbers in tracebacks are README's.
-    code = compile("\n" * (block.line - 1) + block.code, str(README), "exec")
+    # Line numbers in tracebacks are the markdown file's.
+    code = compile("\n" * (block.line - 1) + block.code, str(block.source), "exec")
     exec(code, {"__name__": "__main__"})

@@ -69,7 +69,10 @@ class PoseRefiner(RefinerBase):
             tall, to about 450 / (their height in px): e.g. 6 for a 75 px person (on the
             synthetic suite that made L_2D and L_opt with exact flow help a little more; with
             RAFT's flow no better: see BENCHMARKS.md). Leave it at 1 otherwise.
-        eval_every_n_steps, save, output_dir, num_threads: see :class:`RefinerBase`.
+        eval_every_n_steps: evaluate against ground truth every this many steps (see :class:`RefinerBase`).
+        save: write the refined poses into ``output_dir`` at the end of fitting.
+        output_dir: where to save (default: the trainer's log_dir).
+        num_threads: torch CPU threads during fitting (restored afterwards); None leaves them.
     """
 
     mode = "3d"

@@ -47,7 +47,10 @@ class KeypointRefiner(RefinerBase):
             undetected keypoints are free to follow the flow), real, or none (all 1).
         confidence_threshold: detections at or below it weigh 0 in the deviation term.
         flow_inside_only: the flow term only for keypoints inside the image at frame t-1.
-        eval_every_n_steps, save, output_dir, num_threads: see :class:`RefinerBase`.
+        eval_every_n_steps: evaluate against ground truth every this many steps (see :class:`RefinerBase`).
+        save: write the refined poses into ``output_dir`` at the end of fitting.
+        output_dir: where to save (default: the trainer's log_dir).
+        num_threads: torch CPU threads during fitting (restored afterwards); None leaves them.
     """
 
     mode = "2d"
