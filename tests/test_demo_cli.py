@@ -48,7 +48,7 @@ def test_quick_demo_prints_its_plan_first_and_trains_2_epochs(fake_run: list[dic
     assert main(["demo", "--quick", *SMALL]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("lit-boot demo: a synthetic 'run' scene (3 frames, 48x32, exact GT)")
-    assert "2 epochs per flow stage" in lines[0] and "about 1 min on 2 free CPU cores" in lines[0]
+    assert "2 epochs per flow stage" in lines[0] and "about 30 s on 2 free CPU cores" in lines[0]
     assert "--quick" not in lines[0]
     assert lines[1].startswith("scene 'synth_run_s0': 3 frames, 48x32 px")
     (call,) = fake_run
@@ -66,11 +66,17 @@ def test_default_demo_says_how_long_it_takes_and_names_quick(fake_run: list[dict
 def test_demo_estimate_and_restart_rules(fake_run: list[dict], capsys) -> None:
     assert main(["demo", "--out", "d"]) == 0
     first = capsys.readouterr().out.splitlines()[0]  # 8 frames, 8 epochs: 112 training steps
-    assert "(8 frames, 256x128, exact GT)" in first and "about 1 min" in first
+    assert "(8 frames, 256x128, exact GT)" in first and "about 30 s" in first
     assert main(["demo", "--out", "d"]) == 0  # the same scene and size: resume
+    assert "from scratch about 30 s" in capsys.readouterr().out.splitlines()[0]  # nothing finished yet
+    (Path("d") / "bootstrap").mkdir()
+    (Path("d") / "bootstrap" / "summary.json").write_text("{}")  # as a finished run leaves it
+    assert main(["demo", "--out", "d"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert "holds this demo's finished run" in first and "nothing is run" in first and "from scratch" not in first
     assert main(["demo", "--out", "d", "--epochs", "3"]) == 0  # another size: start again
-    assert [c["overwrite"] for c in fake_run] == [True, False, True]
-    assert [c["flow_epochs"] for c in fake_run] == [8, 8, 3]
+    assert [c["overwrite"] for c in fake_run] == [True, False, False, True]
+    assert [c["flow_epochs"] for c in fake_run] == [8, 8, 8, 3]
 
 
 # --- what a command prints: lit-boot's log lines, no dependency noise (issue 14) ---------------------

@@ -14,6 +14,7 @@ The stages' lines come from the runner's log records (see :func:`~lit_boot.cli.c
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 from jsonargparse import ActionConfigFile
@@ -123,12 +124,19 @@ def demo_parser() -> ArgumentParser:
 
 
 def demo_minutes(frames: int, height: int, width: int, epochs: int) -> float:
-    """About how long the demo takes from scratch on 2 free CPU cores. Measured: ~15 s of
-    start-up, RAFT and pose stage, plus ~0.04 s per training step (one pair, 2 warm RAFT updates
-    on a crop) at 256x128, growing about as the square root of the pixels (README, "Quick
-    start"); far longer on busy cores."""
+    """About how long the demo takes from scratch on 2 free CPU cores, minutes. Measured
+    (BENCHMARKS.md, "Current results": 27 s, --quick 22 s): ~20 s of start-up, RAFT and pose
+    stage, plus ~0.06 s per training step (one pair, 2 warm RAFT updates on a crop) at 256x128,
+    growing about as the square root of the pixels; far longer on busy cores."""
     steps = 2 * (frames - 1) * epochs  # both flow stages train on every pair
-    return (15 + 0.04 * steps * (height * width / (128 * 256)) ** 0.5) / 60
+    return (20 + 0.06 * steps * (height * width / (128 * 256)) ** 0.5) / 60
+
+
+def about(minutes: float) -> str:
+    """``about 30 s`` (under 1.5 min: seconds, rounded up to 10) or ``about 4 min``."""
+    if minutes < 1.5:
+        return f"about {10 * math.ceil(minutes * 6)} s"
+    return f"about {round(minutes)} min"
 
 
 def demo(argv: list[str]) -> int:
@@ -155,10 +163,14 @@ def demo(argv: list[str]) -> int:
     stored = {**spec, "epochs": epochs}  # another scene or size: start again
     fresh = args.overwrite or not spec_file.is_file() or json.loads(spec_file.read_text()) != stored
     minutes = demo_minutes(args.frames, args.height, args.width, epochs)
-    print(f"lit-boot demo: a synthetic {args.motion!r} scene ({args.frames} frames, {args.width}x{args.height}, exact "
-          f"GT); RAFT-small fine-tuned {epochs} epochs per flow stage, flow -> pose -> flow; from scratch about "
-          f"{max(1, round(minutes))} min on 2 free CPU cores" + ("" if args.quick else " (--quick: 2 epochs)"),
-          flush=True)  # fmt: skip
+    if not fresh and (out / "bootstrap" / "summary.json").is_file():  # finished before: nothing runs again
+        print(f"lit-boot demo: {out / 'bootstrap'} holds this demo's finished run; its table again, nothing is run "
+              "(--overwrite true starts again)", flush=True)  # fmt: skip
+    else:
+        print(f"lit-boot demo: a synthetic {args.motion!r} scene ({args.frames} frames, {args.width}x{args.height}, "
+              f"exact GT); RAFT-small fine-tuned {epochs} epochs per flow stage, flow -> pose -> flow; from scratch "
+              f"{about(minutes)} on 2 free CPU cores" + ("" if args.quick else " (--quick: 2 epochs)"),
+              flush=True)  # fmt: skip
     if fresh:
         save_scene(make_scene(**spec), scene_dir, overwrite=True)
         spec_file.write_text(json.dumps(stored) + "\n")
@@ -171,5 +183,6 @@ def demo(argv: list[str]) -> int:
           "EPE in px (person = GT person mask, joints = at the GT joints), MPJPE in mm")  # fmt: skip
     print(result.table())
     print(f"outputs in {result.run_dir} (summary.json, metrics.png, overlay.mp4; "
-          f"tensorboard --logdir {result.run_dir / 'logs' / 'tensorboard'})")  # fmt: skip
+          f"tensorboard --logdir {result.run_dir / 'logs' / 'tensorboard'}); "
+          f"lit-boot report {result.run_dir} writes report.html")  # fmt: skip
     return 0
