@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 import torch
 
-from lit_boot.bootstrap.overlay import _legend, flow_colour_scale, overlay_frames, video_fps
+from lit_boot.bootstrap.overlay import _key_rows, _legend, flow_colour_scale, overlay_frames, video_fps
 from lit_boot.bootstrap.report import write_video
 from lit_boot.data import flow_image
+from lit_boot.synth import make_scene
 
 T, H, W = 3, 40, 56
 
@@ -74,7 +75,24 @@ def test_gt_panels_error_map_and_labels() -> None:
     assert (error[:, H - 5 :] == 128).all()
     assert not torch.equal(raft[:, :10], refined[:, :10])  # labels: "RAFT EPE 0.50", "refined EPE 0.50"
     without = overlay_frames(frames, before, after, None, None, None, legend=False)
-    assert without.shape == (T - 1, 3, 2 * H, 2 * W)  # no GT: no third column
+    assert without.shape == (T - 1, 3, 2 * H, 3 * W)  # no GT: the change column instead
+
+
+def test_without_gt_the_third_column_shows_where_the_flow_changed_and_what_the_frames_say() -> None:
+    scene = make_scene(motion="run", frames=3, height=64, width=96, seed=0)
+    T, _, H, W = scene.frames.shape
+    right = scene.gt.flow.clone()  # the refined flow: the true motion
+    wrong = right.clone()
+    wrong[:, :, :, : W // 2] += 3.0  # RAFT's: 3 px off on the left half
+    out = overlay_frames(scene.frames, wrong, right, None, None, None, legend=False)
+    change, evidence = out[0, :, :H, 2 * W :], out[0, :, H:, 2 * W :]  # the third column
+    rows = slice(18, H - 2)  # below the label
+    left, untouched = change[:, rows, 4 : W // 2 - 4].int(), change[:, rows, W // 2 + 4 : -4].int()
+    assert (untouched >= 245).all()  # unchanged: white
+    assert (left.amin(0) < 160).float().mean() > 0.9  # changed by 4.2 px: dark purple
+    blue = (evidence[2, rows, 8 : W // 2 - 8].int() - evidence[0, rows, 8 : W // 2 - 8].int() > 30).float().mean()
+    assert blue > 0.5  # the frames say the refined flow is better there
+    assert (evidence[:, rows, W // 2 + 6 : -6] >= 245).float().mean() > 0.9  # the same flow: no change
 
 
 def test_legend_shows_the_wheel_the_skeleton_colours_and_the_error_bar() -> None:
@@ -82,7 +100,7 @@ def test_legend_shows_the_wheel_the_skeleton_colours_and_the_error_bar() -> None
     flow = uniform_flow(T - 1, 1.0, 1.0, 120, 160)
     plain = overlay_frames(frames, flow, flow, None, None, None)
     with_gt = overlay_frames(frames, flow, flow, None, None, None, gt_flow=flow)
-    for out, cols in ((plain, 2), (with_gt, 3)):
+    for out, cols in ((plain, 3), (with_gt, 3)):
         key = out[0, :, 240:].permute(1, 2, 0).int()
         assert key.shape[0] > 20 and key.shape[1] == cols * 160
         red = (key[..., 0] > 200) & (key[..., 1] < 60) & (key[..., 2] < 60)
@@ -92,8 +110,10 @@ def test_legend_shows_the_wheel_the_skeleton_colours_and_the_error_bar() -> None
         assert len(hues) > 200 and (hues.argmax(-1).bincount(minlength=3) > 20).all()
         dark = (key.amax(-1) < 60).sum()
         assert dark > 50  # text
-    blue = lambda k: ((k[..., 2] > 150) & (k[..., 0] < 80)).sum()  # noqa: E731
-    assert blue(with_gt[0, :, 240:].permute(1, 2, 0).int()) > blue(plain[0, :, 240:].permute(1, 2, 0).int())
+    purple = lambda k: ((k[..., 0] > k[..., 1] + 40) & (k[..., 2] > k[..., 1] + 40)).sum()  # noqa: E731
+    keys = [out[0, :, 240:].permute(1, 2, 0).int() for out in (plain, with_gt)]
+    assert purple(keys[0]) > purple(keys[1]) + 20  # without GT: the change's colour bar
+    assert keys[0].shape[0] > keys[1].shape[0]  # and one more line: the census error change
 
 
 def test_video_plays_at_a_watchable_rate(tmp_path: Path) -> None:
@@ -139,5 +159,5 @@ def test_decision_panel_replaces_the_frame_and_gets_a_legend_line() -> None:
     assert (panel[2, 25:, 40:] > panel[0, 25:, 40:]).all()  # tuned kept: blue tint
     assert (panel[0, 25:, :5] == panel[2, 25:, :5]).all()  # RAFT kept: grey
     assert torch.equal(grid(shown[0], 2)[0][1], grid(plain[0], 2)[0][1])  # the other panels as before
-    rows = _legend(4000, 400, 1.0, None).shape[0]
-    assert _legend(4000, 400, 1.0, None, decisions=True).shape[0] == rows + round(34 * 1.0)  # one more line
+    rows = _legend(4000, 400, 1.0, _key_rows(None, None, False)).shape[0]
+    assert _legend(4000, 400, 1.0, _key_rows(None, None, True)).shape[0] == rows + round(34 * 1.0)  # one more line

@@ -123,7 +123,7 @@ def test_no_line_is_drawn_across_a_stage_without_a_value() -> None:
 
 
 def panels(mosaic: torch.Tensor, h: int, w: int) -> list[torch.Tensor]:
-    """[frame, flow before, pose, flow after] of a mosaic without GT."""
+    """[frame, flow before, pose, flow after] of a mosaic (its first two columns)."""
     return [mosaic[:, :h, :w], mosaic[:, :h, w : 2 * w], mosaic[:, h : 2 * h, :w], mosaic[:, h : 2 * h, w : 2 * w]]
 
 
@@ -133,9 +133,9 @@ def test_overlay_shape_and_flow_panels() -> None:
     zero, moving = torch.zeros(T - 1, 2, H, W), uniform_flow(T - 1, 2.0, -1.0, H, W)
     original = frames.clone()
     out = overlay_frames(frames, zero, moving, None, None, None, legend=False)
-    assert out.shape == (T - 1, 3, 2 * H, 2 * W) and out.dtype == torch.uint8
+    assert out.shape == (T - 1, 3, 2 * H, 3 * W) and out.dtype == torch.uint8  # without GT: the change column
     keyed = overlay_frames(frames, zero, moving, None, None, None)
-    assert keyed.shape[:2] == (T - 1, 3) and keyed.shape[2] > 2 * H and keyed.shape[3] == 2 * W
+    assert keyed.shape[:2] == (T - 1, 3) and keyed.shape[2] > 2 * H and keyed.shape[3] == 3 * W
     assert torch.equal(keyed[:, :, : 2 * H], out)  # the key goes below
     for t in range(T - 1):
         frame, before, pose, after = panels(out[t], H, W)
@@ -169,7 +169,7 @@ def test_overlay_skeleton_colours() -> None:
     after = scene.gt.joints2d
     before = after + torch.tensor([-25.0, 0.0])  # 25 px to the left
     out = overlay_frames(scene.frames, scene.gt.flow, scene.gt.flow, before, after, scene.gt.joints_layout)
-    assert out.shape[:2] == (T - 1, 3) and out.shape[2] > 2 * H and out.shape[3] == 2 * W
+    assert out.shape[:2] == (T - 1, 3) and out.shape[2] > 2 * H and out.shape[3] == 3 * W
     for t in range(T - 1):
         pose = panels(out[t], H, W)[2].int()
         for j in (1, 4):  # knees: below the label band
@@ -190,8 +190,8 @@ def test_overlay_downscales() -> None:
     scene_like = torch.zeros(T, 3, H, W, dtype=torch.uint8)
     joints = torch.tensor([[float(x), 40.0] for x in range(20, 90, 5)]).expand(T, 14, 2).clone()
     flows = torch.zeros(1, 2, H, W), torch.ones(1, 2, H, W)
-    out = overlay_frames(scene_like, *flows, None, joints, "lsp14", max_side=100, legend=False)
-    assert out.shape == (1, 3, 60, 100)  # the 120 x 200 mosaic halved
+    out = overlay_frames(scene_like, *flows, None, joints, "lsp14", max_side=150, legend=False)
+    assert out.shape == (1, 3, 60, 150)  # the 120 x 300 mosaic halved
     pose = panels(out[0], 30, 50)[2]
     r, g, b = pose[:, 20, 25].tolist()  # joint 6 at (50, 40) px -> (24.75, 19.75) px
     assert g > 200 and r < 60 and b < 60, (r, g, b)

@@ -20,7 +20,8 @@ import torch
 import lit_boot
 from lit_boot.bootstrap import bootstrap
 from lit_boot.bootstrap.html_report import REPORT_HTML, write_report
-from lit_boot.bootstrap.pair_maps import CHANGED_PX, PairMaps, nice_ceiling, pick_pairs
+from lit_boot.bootstrap.overlay import nice_ceiling
+from lit_boot.bootstrap.pair_maps import CHANGED_PX, PairMaps, pick_pairs
 from lit_boot.bootstrap.verdict import EvidenceTally, certainty, evidence_sentence
 from lit_boot.cli import main
 

@@ -19,13 +19,14 @@ from ..data.visualize import draw_skeleton, flow_image
 from .decisions import decision_image
 
 __all__ = ["overlay_frames", "flow_colour_scale", "video_fps", "change_image", "draw_poses", "resize_image",
-           "clean_flow"]
+           "clean_flow", "nice_ceiling", "sequential_image", "CHANGE_CMAP"]
 
 MOVING_PX = 0.5  # a pixel "moves" when its flow is longer than this (px)
 FLOW_PERCENTILE = 90.0  # of the moving pixels' magnitudes: the flow colour scale
 ERROR_PERCENTILE = 99.0  # of |EPE change| over valid pixels: the error map's scale
 _SAMPLES = 1_000_000  # percentiles from at most about this many values per array
-_INVALID = 128  # grey where the GT flow is not defined
+_INVALID = 128  # grey where a map is not defined (no GT flow; a warp leaving the image)
+CHANGE_CMAP = "Purples"  #: |refined - RAFT| px: white unchanged, dark purple at the scale
 
 
 def video_fps(num_frames: int, source_fps: float, seconds: float = 5.0, slowest: float = 2.0) -> float:
@@ -50,6 +51,22 @@ def flow_colour_scale(magnitudes: list[np.ndarray]) -> float:
     if moving.size:
         return max(0.01, float(np.percentile(moving, FLOW_PERCENTILE)))
     return max(0.01, float(np.percentile(values, 99.0))) if values.size else 1.0
+
+
+def nice_ceiling(value: float, floor: float) -> float:
+    """The smallest of 1, 2, 2.5, 5 x 10^k at or above max(``value``, ``floor``) (a legend's end)."""
+    value = max(float(value), floor)
+    power = 10.0 ** np.floor(np.log10(value))
+    return float(next(m * power for m in (1, 2, 2.5, 5, 10) if m * power >= value * (1 - 1e-9)))
+
+
+def sequential_image(values: torch.Tensor, scale: float, cmap: str, valid: torch.Tensor | None = None) -> np.ndarray:
+    """``values`` (H, W) in [0, ``scale``] through the colour map ``cmap`` (beyond: its end),
+    grey where not ``valid``: HWC uint8."""
+    rgb = colormaps[cmap]((values.float().numpy() / scale).clip(0, 1), bytes=True)[..., :3].copy()
+    if valid is not None:
+        rgb[~valid.numpy()] = _INVALID
+    return rgb
 
 
 def change_image(change: torch.Tensor, valid: torch.Tensor, scale: float) -> np.ndarray:
@@ -86,41 +103,82 @@ def _label(image: np.ndarray, text: str) -> np.ndarray:
     return image
 
 
-def _legend(width: int, panel: int, flow_scale: float, error_scale: float | None, decisions: bool = False) -> np.ndarray:
+def _legend(width: int, panel: int, flow_scale: float, rows: list[tuple[str, tuple | None]]) -> np.ndarray:
     """The key under the mosaic, HWC uint8 (rows, ``width``): a flow colour wheel (flow_image of
-    vectors up to ``flow_scale`` px) with the scale, the skeleton colours, and with GT the
-    error map's colour bar over [-error_scale, error_scale] px, and with ``decisions`` what the
-    decision panel's colours mean. ``panel``: the panel's shorter
-    side, px, sets the text size; a key wider than ``width`` is scaled down to fit."""
-    lines = [f"flow: hue = direction, white = still, full colour >= {flow_scale:.2g} px",
-             "pose before (input)", "pose after (refined)"]  # fmt: skip
-    if error_scale is not None:
-        lines.append(f"+-{error_scale:.2g} px: EPE change vs GT, refined - RAFT (blue better, red worse, grey no GT)")
-    if decisions:
-        lines.append("decisions: orange = the target painted, blue = the tuned flow kept (grey: RAFT's flow kept)")
+    vectors up to ``flow_scale`` px) beside the flow line, then ``rows``: (text, sample) with
+    sample None, ("line", RGB) as the skeletons are drawn, or ("bar", colour map name).
+    ``panel``: the panel's shorter side, px, sets the text size; a key wider than ``width`` is
+    scaled down to fit."""
+    lines = [(f"flow: hue = direction, white = still, full colour >= {flow_scale:.2g} px", None), *rows]
     font, text = cv2.FONT_HERSHEY_SIMPLEX, max(0.4, panel / 400)
     row = round(34 * text)
     wheel, mark = 3 * row - 4, 3 * row  # the wheel's diameter; line samples and colour bar
     left = 10 + wheel
-    widest = max(cv2.getTextSize(s, font, text, 1)[0][0] for s in lines)
-    image = np.full((len(lines) * row + 4, max(width, left + mark + widest + 6), 3), 255, np.uint8)
+    widest = max(cv2.getTextSize(s, font, text, 1)[0][0] for s, _ in lines)
+    image = np.full((max(len(lines) * row, wheel) + 4, max(width, left + mark + widest + 6), 3), 255, np.uint8)
     y, x = np.mgrid[:wheel, :wheel].astype(np.float32) - (wheel - 1) / 2
     disk = flow_image(torch.from_numpy(np.stack([x, y]) * (2 * flow_scale / wheel)), max_magnitude=flow_scale)
     inside = (x**2 + y**2 <= (wheel / 2) ** 2)[..., None]
     image[2 : 2 + wheel, 4 : 4 + wheel] = np.where(inside, disk.permute(1, 2, 0).numpy(), 255)
-    for i, line in enumerate(lines):
+    for i, (line, sample) in enumerate(lines):
         top, at = 2 + i * row, left + (mark if i else 0)
-        if i in (1, 2):  # a red / green line sample, as the skeletons are drawn
-            colour = ((255, 0, 0), (0, 255, 0))[i - 1]
-            cv2.line(image, (left, top + row // 2), (left + mark - 8, top + row // 2), colour, 3)
-        elif i == 3:  # the error map's colour bar
-            image[top + 3 : top + row - 3, left : left + mark - 8] = colormaps["RdBu_r"](
+        if sample is not None and sample[0] == "line":
+            cv2.line(image, (left, top + row // 2), (left + mark - 8, top + row // 2), sample[1], 3)
+        elif sample is not None:  # a colour bar
+            image[top + 3 : top + row - 3, left : left + mark - 8] = colormaps[sample[1]](
                 np.linspace(0, 1, mark - 8), bytes=True)[None, :, :3]  # fmt: skip
         cv2.putText(image, line, (at, top + row - round(0.3 * row)), font, text, (0, 0, 0), 1, cv2.LINE_AA)
     if image.shape[1] > width:
         height = max(1, round(image.shape[0] * width / image.shape[1]))
         image = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
     return image
+
+
+def _key_rows(error_scale: float | None, evidence: tuple[float, float] | None, decisions: bool) -> list:
+    """The legend's rows after the flow line (see :func:`_legend`)."""
+    rows: list = [("pose before (input)", ("line", (255, 0, 0))), ("pose after (refined)", ("line", (0, 255, 0)))]
+    if error_scale is not None:
+        rows.append((f"+-{error_scale:.2g} px: EPE change vs GT, refined - RAFT (blue better, red worse, grey no GT)",
+                     ("bar", "RdBu_r")))  # fmt: skip
+    if evidence is not None:
+        rows.append((f"0..{evidence[0]:g} px: change |refined - RAFT| (white: unchanged)", ("bar", CHANGE_CMAP)))
+        rows.append((f"+-{evidence[1]:g} of 48: census error change, refined - RAFT (blue: the frames say better)",
+                     ("bar", "RdBu_r")))  # fmt: skip
+    if decisions:
+        rows.append(("decisions: orange = the target painted, blue = the tuned flow kept (grey: RAFT's flow kept)",
+                     None))  # fmt: skip
+    return rows
+
+
+@torch.no_grad()
+def _evidence_column(frames: torch.Tensor, flows: dict, size: tuple[int, int]) -> tuple[list, list, float, float]:
+    """Without GT, the third column of each pair at panel ``size`` (h, w): the change
+    |after - before| px (:data:`CHANGE_CMAP`) and the census error change after - before (0..48
+    units, RdBu_r; grey where a warp leaves the image), measured on the frames scaled to the
+    panel with the flows scaled alike (cheap for long videos); and their scales (99th
+    percentiles rounded up by :func:`nice_ceiling`, at least 0.5)."""
+    from ..flow.evidence import photometric_error  # imports kornia: only when a video is made
+
+    (h, w), (H, W) = size, frames.shape[-2:]
+    change = (flows["after"] - flows["before"]).norm(dim=1)
+    change_scale = nice_ceiling(float(np.percentile(_sample(change.numpy()), 99.0)), 0.5)
+    small = torch.stack([torch.from_numpy(np.ascontiguousarray(resize_image(f, size))).permute(2, 0, 1)
+                         for f in frames.detach().cpu()])  # fmt: skip
+    per_px = torch.tensor([w / W, h / H])[:, None, None]
+    deltas, valids = [], []
+    for t in range(frames.shape[0] - 1):
+        errors = []
+        for key in ("before", "after"):
+            flow = torch.from_numpy(np.ascontiguousarray(resize_image(flows[key][t], size))).permute(2, 0, 1) * per_px
+            (error,), (valid,) = photometric_error(small[t : t + 1], small[t + 1 : t + 2], flow[None])
+            errors.append((error, valid))
+        deltas.append(errors[1][0] - errors[0][0])
+        valids.append(errors[0][1] & errors[1][1])
+    gains = torch.cat([d[v] for d, v in zip(deltas, valids)]).abs()
+    census_scale = nice_ceiling(float(np.percentile(_sample(gains.numpy()), 99.0)) if gains.numel() else 0.0, 0.5)
+    changes = [resize_image(sequential_image(c, change_scale, CHANGE_CMAP), size) for c in change]
+    evidence = [change_image(d, v, census_scale) for d, v in zip(deltas, valids)]
+    return changes, evidence, change_scale, census_scale
 
 
 def _check_inputs(frames, flow_before, flow_after, joints, layout, gt_flow, gt_valid) -> JointLayout | None:
@@ -163,23 +221,25 @@ def overlay_frames(
     legend: bool = True,
     decisions: dict[str, torch.Tensor] | None = None,
 ) -> torch.Tensor:
-    """Before/after mosaics, one per frame pair: uint8 (T-1, 3, 2h + key, C w), C = 2 or 3.
+    """Before/after mosaics, one per frame pair: uint8 (T-1, 3, 2h + key, 3 w).
 
     frames uint8 (T, 3, H, W) RGB; flow_before / flow_after float (T-1, 2, H, W) px, pair t ->
     t+1; joints_before / joints_after (T, J, 2) px in ``layout`` (J = its number of joints,
     NaN: not drawn), or None; gt_flow float (T-1, 2, H, W) px or None, gt_valid bool (T-1, H,
-    W) where the GT counts (None: everywhere; grey elsewhere). Mosaic for pair t without GT:
-    [frame t | flow before] over [frame t with the skeleton before in red and after in green
-    (on top) | flow after]; with GT a third column: [GT flow] over [EPE change], the
-    per-pixel |after - GT| - |before - GT| px in RdBu_r (blue: nearer the GT), and the flow
-    labels carry each pair's mean EPE. Every flow panel of the video shares one colour scale,
-    :func:`flow_colour_scale` of all of them, longer vectors clipped to full colour; zero
-    flow is white; the EPE change spans +-its 99th percentile |value|. Each panel has a text
-    label; ``legend`` adds the key below (colour wheel and scale, skeleton colours, error
-    bar). ``decisions`` ({"painted": (T-1, H, W) bool, "kept": (T-1, H, W) float}, see
-    :mod:`~lit_boot.bootstrap.decisions`) replaces the top-left frame with the decision map
-    (:func:`~lit_boot.bootstrap.decisions.decision_image`). Panels are h x w = H x W, scaled down (INTER_AREA; joints scaled with them) when
-    the mosaic's longer side would exceed ``max_side``. Raises ValueError naming the argument
+    W) where the GT counts (None: everywhere; grey elsewhere). Mosaic for pair t: [frame t | flow
+    before] over [frame t with the skeleton before in red and after in green (on top) | flow
+    after], and a third column: with GT, [GT flow] over [EPE change], the per-pixel
+    |after - GT| - |before - GT| px in RdBu_r (blue: nearer the GT), the flow labels carrying
+    each pair's mean EPE; without GT, [change |after - before| px] over [census error change,
+    after - before, what the frames say: blue better] (:func:`_evidence_column`). Every flow
+    panel of the video shares one colour scale, :func:`flow_colour_scale` of all of them, longer
+    vectors clipped to full colour; zero flow is white; the EPE change spans +-its 99th
+    percentile |value|. Each panel has a text label; ``legend`` adds the key below (colour wheel
+    and scale, skeleton colours, colour bars). ``decisions`` ({"painted": (T-1, H, W) bool,
+    "kept": (T-1, H, W) float}, see :mod:`~lit_boot.bootstrap.decisions`) replaces the top-left
+    frame with the decision map (:func:`~lit_boot.bootstrap.decisions.decision_image`). Panels
+    are h x w = H x W, scaled down (INTER_AREA; joints scaled with them) when the mosaic's
+    longer side would exceed ``max_side``. Raises ValueError naming the argument
     for a wrong shape.
     """
     joints = {"before": joints_before, "after": joints_after}
@@ -187,7 +247,7 @@ def overlay_frames(
     if max_side < 2:
         raise ValueError(f"overlay_frames: max_side must be >= 2, got {max_side}")
     T, _, H, W = frames.shape
-    cols = 2 if gt_flow is None else 3
+    cols = 3
     scale = min(1.0, max_side / max(2 * H, cols * W))
     h, w = max(1, int(H * scale)), max(1, int(W * scale))
     resize = functools.partial(resize_image, size=(h, w))
@@ -200,7 +260,10 @@ def overlay_frames(
         magnitudes.append(gt.norm(dim=1)[valid].numpy())
         epe, errors, error_scale = _epe_change(flows, gt, valid)
     flow_scale = flow_colour_scale(magnitudes)
-    key = _legend(cols * w, min(h, w), flow_scale, error_scale, decisions is not None) if legend else None
+    evidence = _evidence_column(frames, flows, (h, w)) if gt_flow is None else None
+    scales = evidence[2:] if evidence is not None else None
+    rows = _key_rows(error_scale, scales, decisions is not None)
+    key = _legend(cols * w, min(h, w), flow_scale, rows) if legend else None
     mosaics = []
     for t in range(T - 1):
         frame = torch.from_numpy(np.ascontiguousarray(resize(frames[t].detach().cpu())))
@@ -221,6 +284,9 @@ def overlay_frames(
             gt_img[~valid[t].numpy()] = _INVALID
             top.append(_label(resize(gt_img), "GT flow"))
             bottom.append(_label(resize(change_image(errors[t], valid[t], error_scale)), "EPE change"))
+        else:
+            top.append(_label(evidence[0][t], "change |refined - RAFT|"))
+            bottom.append(_label(evidence[1][t], "census error change"))
         rows = [np.concatenate(top, 1), np.concatenate(bottom, 1)] + ([key] if key is not None else [])
         mosaics.append(torch.from_numpy(np.concatenate(rows, 0)).permute(2, 0, 1))
     return torch.stack(mosaics).contiguous()

@@ -20,21 +20,20 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from matplotlib import colormaps
 
 from ..data.visualize import flow_image
 from ..flow.evidence import photometric_error
 from .decisions import decision_image
 from .finished import FinishedRun
-from .overlay import change_image, clean_flow, draw_poses, flow_colour_scale, resize_image
+from .overlay import (CHANGE_CMAP, change_image, clean_flow, draw_poses, flow_colour_scale, nice_ceiling, resize_image,
+                      sequential_image)  # fmt: skip
 
 __all__ = ["PairMaps", "Panel", "Scales", "pair_maps", "pair_stats", "shared_scales", "pair_panels", "pick_pairs",
-           "nice_ceiling", "CHANGED_PX", "SEQUENTIAL", "DIVERGING"]
+           "CHANGED_PX", "SEQUENTIAL", "DIVERGING"]
 
 CHANGED_PX = 0.1  #: a pixel's flow changed when the final flow is farther than this from RAFT's (px)
-SEQUENTIAL = {"change": "Purples", "census": "inferno", "epe": "inferno"}  #: colour maps (Matplotlib names)
+SEQUENTIAL = {"change": CHANGE_CMAP, "census": "inferno", "epe": "inferno"}  #: colour maps (Matplotlib names)
 DIVERGING = "RdBu_r"  #: after - before: blue lower (better), white unchanged, red higher (worse)
-_GREY = 128  # where a map is not defined
 
 
 @dataclass
@@ -81,13 +80,6 @@ def pick_pairs(pairs: int, most: int) -> list[int]:
     if pairs <= most:
         return list(range(pairs))
     return sorted({int(round(i)) for i in np.linspace(0, pairs - 1, most)})
-
-
-def nice_ceiling(value: float, floor: float) -> float:
-    """The smallest of 1, 2, 2.5, 5 x 10^k at or above max(``value``, ``floor``) (a legend's end)."""
-    value = max(float(value), floor)
-    power = 10.0 ** np.floor(np.log10(value))
-    return float(next(m * power for m in (1, 2, 2.5, 5, 10) if m * power >= value * (1 - 1e-9)))
 
 
 @torch.no_grad()
@@ -159,15 +151,6 @@ def shared_scales(run: FinishedRun, maps: dict[int, PairMaps]) -> Scales:
                   census_change=nice_ceiling(_percentile(census_change), 0.5) if has_census else None,
                   epe=nice_ceiling(_percentile(epe), 0.5) if has_gt else None,
                   epe_change=nice_ceiling(_percentile(epe_change), 0.5) if has_gt else None)  # fmt: skip
-
-
-def sequential_image(values: torch.Tensor, scale: float, cmap: str, valid: torch.Tensor | None = None) -> np.ndarray:
-    """``values`` (H, W) in [0, ``scale``] through the colour map ``cmap`` (beyond: its end),
-    grey where not ``valid``: HWC uint8."""
-    rgb = colormaps[cmap]((values.float().numpy() / scale).clip(0, 1), bytes=True)[..., :3].copy()
-    if valid is not None:
-        rgb[~valid.numpy()] = _GREY
-    return rgb
 
 
 def _poses_image(run: FinishedRun, t: int, size: tuple[int, int]) -> np.ndarray:
