@@ -168,6 +168,9 @@ def estimate_pose_parser() -> ArgumentParser:
     parser.add_argument("--min_detection_confidence", type=float, default=0.5,
                         help="MediaPipe's person detector threshold")  # fmt: skip
     parser.add_argument("--on_jump", type=str, default="keep", help="keep or drop detections that jump")
+    parser.add_argument("--detector", type=str | None, default=None,
+                        help="a YOLOX person detector (yolox_nano, looked up in checkpoints/, or an .onnx path): "
+                             "adds the person's box in every frame, where the method zooms (needs no keypoints)")  # fmt: skip
     parser.add_argument("--overwrite", type=bool, nargs="?", const=True, default=False, help="replace --out")
     return parser
 

@@ -76,6 +76,14 @@ def check_estimates(owner: str, est: Any, T: int) -> None:
         _check(f"{owner}.keypoints_conf", est.keypoints_conf, (T, K), "float")
         if (est.keypoints_conf < 0).any() or (est.keypoints_conf > 1).any():
             raise SceneValidationError(f"{owner}.keypoints_conf: expected values in [0, 1]")
+    boxes = getattr(est, "person_boxes", None)
+    if boxes is not None:
+        _check(f"{owner}.person_boxes", boxes, (T, 5), "float")
+        if (boxes[:, 4] < 0).any() or (boxes[:, 4] > 1).any():
+            raise SceneValidationError(f"{owner}.person_boxes: expected scores (column 4) in [0, 1]")
+        found = boxes[:, 4] > 0
+        if ((boxes[found, 2:4] < boxes[found, 0:2])).any():
+            raise SceneValidationError(f"{owner}.person_boxes: expected x0 <= x1 and y0 <= y1 where a person is found")
 
 
 @dataclass
@@ -140,6 +148,9 @@ class Scene:
     joints3d (T, J, 3) mm in the camera frame (root-relative when the camera model is
     weak perspective), ``joints3d_layout`` names the joints; cameras: per-frame cameras.
     keypoints2d (T, K, 2) px with keypoints_conf (T, K) in [0, 1] (0 = not detected).
+    person_boxes (T, 5): the person's box per frame from a person detector, (x0, y0, x1, y1) px
+    (pixel centres at integer coordinates, the box's outer edges) and a score in [0, 1] (0 =
+    nobody found).
     """
 
     frames: torch.Tensor
@@ -153,6 +164,7 @@ class Scene:
     keypoints_layout: str = "coco17"
     gt: GroundTruth | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
+    person_boxes: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         self.validate()
@@ -186,11 +198,13 @@ class Scene:
     # --- the pose in the method's two modes (the one place the 3D/2D switch is made) --------------
     def require_pose(self, mode: str) -> None:
         """Raise ValueError (naming the scene) unless it has the pose ``mode`` works from: "3d",
-        3D joints with cameras; "2d", 2D keypoints with a confidence above 0 somewhere. Keypoints
-        of confidence 0 everywhere (a pose estimator that found nobody) are named as such."""
+        3D joints with cameras; "2d", 2D keypoints with a confidence above 0 somewhere, or a
+        person box. Keypoints of confidence 0 everywhere and no person box (the estimators found
+        nobody) are named as such."""
         if mode not in POSE_MODES:
             raise ValueError(f"mode: expected one of {POSE_MODES}, got {mode!r}")
         nobody = self.keypoints_conf is not None and not bool((self.keypoints_conf > 0).any())
+        nobody &= self.person_boxes is None or not bool((self.person_boxes[:, 4] > 0).any())
         if nobody and (mode == "2d" or self.joints3d is None):
             raise ValueError(f"scene {self.name!r}: no person in any frame (every keypoint has confidence 0: the "
                              "pose estimator found nobody), so there is nothing to bootstrap")  # fmt: skip

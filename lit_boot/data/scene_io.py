@@ -6,7 +6,7 @@ Folder layout (format ``lit-boot-scene``, version 1)::
     <path>/arrays.npz              uncompressed np.savez; one key per present tensor field
     <path>/scene.json              everything else (see :func:`save_scene`)
 
-npz keys: joints3d, cameras_params, cameras_crops, keypoints2d, keypoints_conf, and the
+npz keys: joints3d, cameras_params, cameras_crops, keypoints2d, keypoints_conf, person_boxes, and the
 ground truth's gt_flow, gt_flow_valid, gt_flow_occluded, gt_joints3d, gt_joints2d, gt_keypoints2d,
 gt_cameras_params, gt_cameras_crops, gt_person_mask. Dtypes are kept exactly.
 """
@@ -60,7 +60,8 @@ def _camera_json(cameras: Cameras | None) -> dict[str, Any] | None:
 
 def _arrays(scene: Scene) -> dict[str, torch.Tensor]:
     """The scene's present tensor fields under their npz keys."""
-    out = {"joints3d": scene.joints3d, "keypoints2d": scene.keypoints2d, "keypoints_conf": scene.keypoints_conf}
+    out = {"joints3d": scene.joints3d, "keypoints2d": scene.keypoints2d, "keypoints_conf": scene.keypoints_conf,
+           "person_boxes": scene.person_boxes}
     out |= _camera_arrays("cameras", scene.cameras)
     if scene.gt is not None:
         out |= {f"gt_{key}": getattr(scene.gt, key) for key in _GT_TENSORS}
@@ -261,6 +262,7 @@ def load_scene(path: str | os.PathLike) -> Scene:
             cameras=_cameras(meta["cameras"], arrays, "cameras"),
             keypoints2d=arrays.get("keypoints2d"), keypoints_conf=arrays.get("keypoints_conf"),
             keypoints_layout=meta["keypoints_layout"], gt=gt, metadata=meta["metadata"],
+            person_boxes=arrays.get("person_boxes"),
         )  # fmt: skip
     except KeyError as err:
         raise SceneFormatError(f"{path / 'scene.json'}: corrupted, missing key {err}") from None

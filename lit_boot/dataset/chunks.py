@@ -166,7 +166,7 @@ def slice_scene(scene: Scene, start: int, stop: int) -> Scene:
         scene, frames=_cut(scene.frames, start, stop), joints3d=_cut(scene.joints3d, start, stop),
         cameras=_cut_cameras(scene.cameras, start, stop), keypoints2d=_cut(scene.keypoints2d, start, stop),
         keypoints_conf=_cut(scene.keypoints_conf, start, stop), gt=_cut_gt(scene.gt, start, stop),
-        metadata=_cut_metadata(scene.metadata, start, stop, T),
+        metadata=_cut_metadata(scene.metadata, start, stop, T), person_boxes=_cut(scene.person_boxes, start, stop),
     )  # fmt: skip
 
 
@@ -314,4 +314,5 @@ def stitch_estimates(parts: list[tuple[int, PoseEstimates]], num_frames: int) ->
         frame_indices=_stitch_frame_indices(parts, num_frames), image_size=first.image_size,
         source="+".join(sources), metadata={"chunks": [[s, s + e.num_frames] for s, e in parts],
                                             "parts": [e.metadata for _, e in parts]},
+        person_boxes=stitch(lambda e: e.person_boxes),
     )  # fmt: skip

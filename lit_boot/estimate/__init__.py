@@ -7,7 +7,9 @@ the conversions in :mod:`.world_to_lsp` and :mod:`.tracking` need no MediaPipe.
 
 ``PersonDetector(model="yolox_nano").detect_frames(frames)`` gives each frame's person boxes
 (YOLOX through onnxruntime, which the same extra installs and which is imported only when a
-detector is built); ``main_person_boxes(detections)`` follows one person over the frames.
+detector is built); ``main_person_boxes(detections)`` follows one person over the frames, and
+``person_boxes(frames, "yolox_nano")`` does both (``estimate_poses(..., detector=...)`` adds them
+to the estimates: the region the method zooms on).
 """
 
 from .detector import (
@@ -36,7 +38,7 @@ from .mediapipe_pose import (
     run_mediapipe,
     summary_line,
 )
-from .person_track import main_person_boxes
+from .person_track import main_person_boxes, person_boxes
 from .tracking import JUMP_POLICIES, drop_jumps, find_jumps
 from .world_to_lsp import (
     HEAD_TOP_FACTOR,
@@ -73,6 +75,7 @@ __all__ = [
     "DETECTOR_MODELS",
     "resolve_detector_weights",
     "main_person_boxes",
+    "person_boxes",
     "JUMP_POLICIES",
     "drop_jumps",
     "find_jumps",

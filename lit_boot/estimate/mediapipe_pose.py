@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -228,12 +229,16 @@ def estimate_poses(
     stride: int = 1,
     max_frames: int | None = None,
     resize: Any = None,
+    detector: Any = None,
 ) -> PoseEstimates:
     """MediaPipe Pose on every frame of ``video``: frames (T, 3, H, W) uint8 RGB, a Scene, or a
     video file / folder of frames (read with ``read_video(path, stride, max_frames, resize)``;
     ``stride``, ``max_frames`` and ``resize`` apply to paths only). Keypoints are in pixels of
-    the frames MediaPipe saw (``image_size``). Returns PoseEstimates with source
-    ``mediapipe-<version>``; see the module docstring for conventions."""
+    the frames MediaPipe saw (``image_size``). With a ``detector`` (a YOLOX model path or name,
+    e.g. ``"yolox_nano"``, or a :class:`~.detector.PersonDetector`) the main person's box in
+    every frame is found too (``person_boxes``; :func:`~.person_track.person_boxes`): the
+    region the method spends resolution on, also where MediaPipe misses the person. Returns
+    PoseEstimates with source ``mediapipe-<version>``; see the module docstring for conventions."""
     mp = import_mediapipe()
     frame_indices = None
     if isinstance(video, (str, os.PathLike)):
@@ -250,11 +255,20 @@ def estimate_poses(
     meta = {"model_complexity": model_complexity, "min_detection_confidence": min_detection_confidence,
             "min_tracking_confidence": min_tracking_confidence, "mediapipe_version": mp.__version__,
             "seconds_per_frame": float(raw["seconds"].mean())}  # fmt: skip
-    return poses_from_landmarks(
+    est = poses_from_landmarks(
         raw["landmarks"], landmark_confidence(raw["visibility"], raw["presence"]), raw["world"], raw["found"],
         tuple(video.shape[2:]), frame_indices, max_jump=max_jump, on_jump=on_jump,
         source=f"mediapipe-{mp.__version__}", metadata=meta,
     )  # fmt: skip
+    if detector is None:
+        return est
+    from .detector import PersonDetector
+    from .person_track import person_boxes
+
+    detector = detector if isinstance(detector, PersonDetector) else PersonDetector(detector)
+    boxes = person_boxes(video, detector)
+    meta = {**est.metadata, "detector": str(detector.path), "detector_found": int((boxes[:, 4] > 0).sum())}
+    return replace(est, person_boxes=boxes, metadata=meta)
 
 
 def _scene_frame_indices(scene: Scene) -> torch.Tensor | None:
@@ -268,9 +282,10 @@ class NoPersonFound(ValueError):
 
 
 def require_person(est: PoseEstimates, what: str | os.PathLike) -> PoseEstimates:
-    """``est`` if a person was found in at least one frame; else :class:`NoPersonFound` naming
-    ``what`` (the video or scene) and what to try."""
-    if not bool(est.found().any()):
+    """``est`` if a person was found in at least one frame (by MediaPipe, or by the person
+    detector); else :class:`NoPersonFound` naming ``what`` (the video or scene) and what to try."""
+    boxes = est.person_boxes
+    if not bool(est.found().any()) and (boxes is None or not bool((boxes[:, 4] > 0).any())):
         raise NoPersonFound(f"{what}: MediaPipe Pose found no person in any of the {est.num_frames} frames, so there "
                             "is no pose to bootstrap (a lower min_detection_confidence than 0.5 may find one; the "
                             "method needs one person visible in most frames)")  # fmt: skip
@@ -283,7 +298,8 @@ def summary_line(est: PoseEstimates) -> str:
     n, T = int(found.sum()), est.num_frames
     mean = float(est.keypoints_conf[found].mean()) if n else 0.0
     jumps = len(est.metadata.get("jumps", []))
-    return (f"{T} frames, {n} with a person ({T - n} without), mean keypoint confidence {mean:.2f} "
+    boxes = "" if est.person_boxes is None else f", the person detector's box in {int((est.person_boxes[:, 4] > 0).sum())}"
+    return (f"{T} frames, {n} with a person ({T - n} without){boxes}, mean keypoint confidence {mean:.2f} "
             f"where found, {jumps} tracking jumps; {est.source}")  # fmt: skip
 
 

@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 
-__all__ = ["main_person_boxes"]
+__all__ = ["main_person_boxes", "person_boxes"]
 
 log = logging.getLogger(__name__)
 
@@ -110,3 +111,16 @@ def main_person_boxes(
     log.debug("main person: found in %d of %d frames (%d bridged), started at frame %d",
               int(found.sum()), T, bridged, start)  # fmt: skip
     return boxes, found
+
+
+def person_boxes(frames: torch.Tensor, detector: Any) -> torch.Tensor:
+    """The main person's box in every frame (T, 3, H, W) uint8 RGB: (T, 5) (x0, y0, x1, y1 px,
+    score: 1 where found or bridged, 0 and zeros where nobody). ``detector``: a
+    :class:`~.detector.PersonDetector`, or a YOLOX model (a path or a name such as
+    ``"yolox_nano"``, looked up like RAFT's weights) to build one with."""
+    from .detector import PersonDetector
+
+    if not isinstance(detector, PersonDetector):
+        detector = PersonDetector(detector)
+    boxes, found = main_person_boxes(detector.detect_frames(frames))
+    return torch.cat([boxes.float() * found[:, None], found[:, None].float()], dim=1)

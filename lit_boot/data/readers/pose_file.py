@@ -9,6 +9,8 @@ Arrays (T rows = T frames; every key optional unless marked)::
     joints3d        (T, J, 3)  float32  mm, camera axes x right, y down, z forward
     cameras_params  (T, P)     float32  P = 3 (s, tx, ty) weak perspective, 7 pinhole
     cameras_crops   (T, 3)     float32  (scale, start_x, start_y) [weak perspective only]
+    person_boxes    (T, 5)     float32  a person detector's box (x0, y0, x1, y1 px, the outer
+                                        edges) and score in [0, 1] (0 = nobody found)
 
 At least one of keypoints2d / joints3d is present; cameras need joints3d. The header (in the
 .npz: key ``header``, a 0-d unicode array holding JSON text; in the .json: the top-level
@@ -43,7 +45,8 @@ __all__ = ["POSES_FORMAT", "POSES_FORMAT_VERSION", "PoseEstimates", "save_poses"
 
 POSES_FORMAT = "lit-boot-pose-estimates"
 POSES_FORMAT_VERSION = 1
-_ARRAYS = ("frame_indices", "keypoints2d", "keypoints_conf", "joints3d", "cameras_params", "cameras_crops")
+_ARRAYS = ("frame_indices", "keypoints2d", "keypoints_conf", "joints3d", "cameras_params", "cameras_crops",
+           "person_boxes")
 #: Largest relative difference of the x and y resize factors weak-perspective cameras tolerate.
 ANISOTROPY_TOLERANCE = 0.01
 
@@ -56,8 +59,9 @@ class PoseEstimates:
     ``keypoints_layout``; joints3d (T, J, 3) mm in ``joints3d_layout`` with ``cameras``;
     either part may be absent, not both. frame_indices (T,) int64: the source-video frame of
     each row (default 0..T-1); image_size (H, W) of the frames the pixels refer to (None =
-    unknown: taken to be the scene's); source: who made them; metadata: JSON-serialisable.
-    Checked on construction (:meth:`validate`).
+    unknown: taken to be the scene's); source: who made them; metadata: JSON-serialisable;
+    person_boxes (T, 5): a person detector's box and score per frame (see
+    :class:`~lit_boot.core.Scene`), or None. Checked on construction (:meth:`validate`).
     """
 
     keypoints2d: torch.Tensor | None = None
@@ -70,6 +74,7 @@ class PoseEstimates:
     image_size: tuple[int, int] | None = None
     source: str = "unknown"
     metadata: dict[str, Any] = field(default_factory=dict)
+    person_boxes: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         if self.frame_indices is None and self.num_frames is not None:
@@ -123,6 +128,7 @@ class PoseEstimates:
         return dataclasses.replace(
             self, keypoints2d=pick(self.keypoints2d), keypoints_conf=pick(self.keypoints_conf),
             joints3d=pick(self.joints3d), cameras=cams, frame_indices=self.frame_indices[rows].clone(),
+            person_boxes=pick(self.person_boxes),
         )  # fmt: skip
 
     def rescaled(self, image_size: tuple[int, int]) -> PoseEstimates:
@@ -133,9 +139,14 @@ class PoseEstimates:
             return dataclasses.replace(self, image_size=tuple(image_size))
         sx, sy = scale_factors(*self.image_size, image_size)
         keypoints = None if self.keypoints2d is None else scale_points(self.keypoints2d, sx, sy)
+        boxes = self.person_boxes
+        if boxes is not None:
+            corners = scale_points(boxes[:, :4].reshape(-1, 2, 2), sx, sy).reshape(-1, 4)
+            boxes = torch.cat([corners, boxes[:, 4:]], dim=1)
         return dataclasses.replace(
-            self, keypoints2d=keypoints, cameras=_rescale_cameras(self.cameras, sx, sy), image_size=tuple(image_size)
-        )
+            self, keypoints2d=keypoints, cameras=_rescale_cameras(self.cameras, sx, sy), image_size=tuple(image_size),
+            person_boxes=boxes,
+        )  # fmt: skip
 
     def apply_to(self, scene: Scene) -> Scene:
         """A copy of ``scene`` with these estimates (the fields present here replace the scene's).
@@ -160,6 +171,8 @@ class PoseEstimates:
                        "keypoints_layout": est.keypoints_layout}  # fmt: skip
         if est.joints3d is not None:
             fields |= {"joints3d": est.joints3d, "joints3d_layout": est.joints3d_layout, "cameras": est.cameras}
+        if est.person_boxes is not None:
+            fields["person_boxes"] = est.person_boxes
         info = {"source": self.source, "fields": sorted(fields), "frame_indices": est.frame_indices.tolist(),
                 "metadata": self.metadata}  # fmt: skip
         history = [*scene.metadata.get("pose_estimates", []), info]
@@ -237,7 +250,7 @@ def _arrays(est: PoseEstimates) -> dict[str, np.ndarray]:
     values = {
         "frame_indices": est.frame_indices, "keypoints2d": est.keypoints2d, "keypoints_conf": est.keypoints_conf,
         "joints3d": est.joints3d, "cameras_params": None if cams is None else cams.params,
-        "cameras_crops": None if cams is None else cams.crops,
+        "cameras_crops": None if cams is None else cams.crops, "person_boxes": est.person_boxes,
     }  # fmt: skip
     out = {}
     for key, value in values.items():
@@ -313,7 +326,7 @@ def load_poses(path: str | os.PathLike) -> PoseEstimates:
             keypoints_layout=header.get("keypoints_layout", "coco17"), joints3d=t.get("joints3d"),
             joints3d_layout=header.get("joints3d_layout", "lsp14"), cameras=cameras, frame_indices=t["frame_indices"],
             image_size=header.get("image_size"), source=header.get("source", "unknown"),
-            metadata=header.get("metadata", {}),
+            metadata=header.get("metadata", {}), person_boxes=t.get("person_boxes"),
         )  # fmt: skip
     except (KeyError, TypeError, ValueError, AttributeError) as err:
         raise DatasetFormatError(f"{path}: malformed pose file: {type(err).__name__}: {err}") from None
