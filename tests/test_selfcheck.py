@@ -25,7 +25,7 @@ TILE = 32
 
 def fast_run(shared, **options):
     flow = {"weights": str(shared / "checkpoints/raft-small.pth"), "train_updates": 2, "predict_updates": 3}
-    return dict(flow=flow, flow_epochs=1, cycles=0, progress_bar=False, video=False,
+    return dict(flow=flow, flow_epochs=1, cycles=0, progress_bar=False, video=False, zoom={"method": "off"},
                 self_check=SelfCheckConfig(method="photometric", tile=TILE), **options)  # fmt: skip
 
 
@@ -73,6 +73,24 @@ def test_a_corrupted_tile_gets_the_initial_flow_and_an_exact_region_keeps_the_tu
     assert torch.equal(flows[:, :, far_bad], initial[:, :, far_bad])
     assert torch.equal(flows[:, :, far_good], tuned[:, :, far_good])
     assert 0.5 < record["kept_tuned_fraction"] < 1.0
+
+
+def test_a_change_beyond_max_change_keeps_the_initial_flow_whatever_the_frames_say(scene):
+    gt = scene.gt.flow.float()
+    person = scene.gt.person_mask[:-1]
+    initial = gt.clone()
+    initial[:, 0, :, :48] += 10.0  # 10 px off on the left half
+    initial[:, 0, :, 48:] += 2.0  # 2 px off on the right half
+    tuned = gt  # exact: better everywhere, by a change of 10 px on the left, 2 px on the right
+    gated = SelfCheckConfig(tile=TILE, max_change_px=8.0)
+    flows, record, weight = self_check(scene.frames, initial, tuned, person, config=gated)
+    assert (weight[:, :, :48] == 0).all()  # refused: a change of 10 px
+    assert weight[:, :, 56:].mean() > 0.5  # a refinement of 2 px, confirmed by the frames
+    assert record["max_change_px"] == 8.0
+    _, _, free = self_check(scene.frames, initial, tuned, person, config=SelfCheckConfig(tile=TILE))
+    assert free[:, :, :40].mean() > 0.5  # without the gate the frames decide alone
+    with pytest.raises(ValueError, match="self_check.max_change_px"):
+        SelfCheckConfig(max_change_px=0.0)
 
 
 def test_ties_keep_the_initial_flow(scene):

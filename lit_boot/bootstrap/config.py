@@ -100,6 +100,9 @@ class SelfCheckConfig:
         own: a person pixel also needs its own error to be lower, not only its window's (else
             the band of background beside a limb, whose window holds limb pixels, goes with
             the limb).
+        max_change_px: None, or the tuned flow is kept only where it moves the flow it is
+            checked against by less than this (px): a larger change is another match, which the
+            frames cannot be trusted to judge (fog, blur, fast motion).
     """
 
     method: str | None = None
@@ -109,8 +112,11 @@ class SelfCheckConfig:
     z: float = 1.0
     blend: int = 0
     own: bool = True
+    max_change_px: float | None = None
 
     def __post_init__(self) -> None:
+        if self.max_change_px is not None and not self.max_change_px > 0:
+            raise ValueError(f"self_check.max_change_px: expected None or > 0 px, got {self.max_change_px}")
         if self.method not in (None, *SELF_CHECKS):
             raise ValueError(f"self_check.method: expected one of {(None, *SELF_CHECKS)}, got {self.method!r}")
         if not 0 <= self.margin < 1:

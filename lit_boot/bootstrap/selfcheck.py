@@ -43,6 +43,7 @@ from torch import Tensor
 
 from ..core import Scene
 from ..flow.evidence import photometric_error
+from ..flow.zoom import refines
 from .config import SELF_CHECKS, BootstrapConfig, SelfCheckConfig
 
 __all__ = ["SELF_CHECKS", "SelfCheckConfig", "region_labels", "region_names", "choose_regions", "choose_pixels",
@@ -210,6 +211,10 @@ def self_check(
         won, mean_i, mean_t, pixels = choose_regions(err_i, err_t, valid & ~on, there, count, margin=margin, z=z)
         on_person = choose_pixels(err_i, err_t, valid, on, window=window, margin=margin, own=own)
         choice[y0:y1, x0:x1] = torch.where(on, on_person, won[there])
+        if config.max_change_px is not None:  # only a refinement is judged by the frames
+            gate = refines(initial[t, :, y0:y1, x0:x1], tuned[t, :, y0:y1, x0:x1], config.max_change_px)
+            choice[y0:y1, x0:x1] &= gate
+            on_person &= gate
         choices.append(choice)
         judged = valid & on
         n = int(judged.sum())
@@ -229,6 +234,7 @@ def self_check(
     regions = sum(len(p["regions"]) for p in per_pair)
     tuned_regions = sum(len(p["tuned"]) for p in per_pair)
     record = {"method": "photometric", "margin": margin, "tile": tile, "blend": blend, "window": window, "z": z, "own": own,
+              "max_change_px": config.max_change_px,
               "kept_tuned_fraction": float(weight.mean()), "regions_tuned": tuned_regions,
               "regions_initial": regions - tuned_regions,
               "person_tuned_fraction": float(weight[person].mean()) if person.any() else 0.0,
