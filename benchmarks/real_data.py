@@ -39,8 +39,16 @@ from lit_boot.estimate import estimate_poses
 from lit_boot.metrics import flow_errors
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+#: Held-out Sintel windows (not in ../shared; BENCHMARKS.md, "Held-out Sintel windows", says where
+#: they come from): the official layout under --heldout-root.
+HELDOUT_ROOT = Path(__file__).resolve().parents[1].parent / "heldout/sintel"
 SINTEL = [("alley_1", 1, 4), ("market_5", 1, 4), ("market_5b", 8, 11), ("temple_3", 21, 24), ("bandage_1", 34, 37),
           ("ambush_4", 3, 8)]  # fmt: skip
+#: (window, scene, first, last, pass) of the held-out windows.
+HELDOUT = [("h_cave_2a", "cave_2", 1, 4, "final"), ("h_cave_2b", "cave_2", 10, 13, "final"),
+           ("h_cave_4", "cave_4", 40, 43, "final"), ("h_ambush_2", "ambush_2", 20, 21, "final"),
+           ("h_ambush_x", "unidentified_ambush", 2, 5, "final"), ("h_shaman_x", "unidentified_shaman", 41, 44, "final"),
+           ("h_alley_2c", "alley_2", 1, 4, "clean")]  # fmt: skip
 GATE = {"gate": "photometric", "gate_level": "bone+pixel", "gate_search": 3}
 
 
@@ -89,7 +97,11 @@ def main() -> None:
     p.add_argument("--parts", default="sintel,basketball,football")
     p.add_argument("--self-check", default=None, choices=("off", "photometric"), help="default: the preset's")
     p.add_argument("--gate", action="store_true", help="targets with the evidence gate (GATE)")
-    p.add_argument("--scenes", default=",".join(name for name, _, _ in SINTEL), help="Sintel samples to run")
+    p.add_argument("--scenes", default=",".join(name for name, _, _ in SINTEL),
+                   help="Sintel windows to run: of SINTEL (../shared) and HELDOUT (--heldout-root)")
+    p.add_argument("--heldout-root", default=str(HELDOUT_ROOT), help="the held-out windows' Sintel root")
+    p.add_argument("--detector", default=str(SHARED / "checkpoints/yolox_nano.onnx"),
+                   help="YOLOX person detector for the person's boxes ('none': MediaPipe's keypoints only)")
     p.add_argument("--flow", default="{}", help='FlowTTT options over the preset\'s, JSON: {"sketch": {"max_disagreement_px": 3}}')
     p.add_argument("--sintel-size", default="218,512", help="H,W (the samples are 436,1024)")
     p.add_argument("--epochs", type=int, default=None, help="flow epochs per stage (default: 50 in 2D, 8 in 3D)")
@@ -102,18 +114,22 @@ def main() -> None:
     args = p.parse_args()
     print(f"settings: {vars(args)}", flush=True)
     rows = []
+    detector = None if args.detector == "none" else args.detector
     if "sintel" in args.parts:
-        size = tuple(int(v) for v in args.sintel_size.split(","))
-        for window, first, last in (s for s in SINTEL if s[0] in args.scenes.split(",")):
-            name, root = window.rstrip("b"), SHARED / "data/sintel_samples"
-            # MediaPipe on the full-size frames (it misses small people), poses rescaled to `size`
-            poses = estimate_poses(read_sintel(root, name, first=first, last=last))
-            scene = poses.apply_to(read_sintel(root, name, first=first, last=last, size=size))
+        size = None if args.sintel_size == "full" else tuple(int(v) for v in args.sintel_size.split(","))
+        windows = [(w, SHARED / "data/sintel_samples", w.rstrip("b"), a, b, "final") for w, a, b in SINTEL]
+        windows += [(w, Path(args.heldout_root), *rest) for w, *rest in HELDOUT]
+        for window, root, name, first, last, pass_name in (w for w in windows if w[0] in args.scenes.split(",")):
+            # MediaPipe (and the detector) on the full-size frames (they miss small people), rescaled to `size`
+            poses = estimate_poses(read_sintel(root, name, first=first, last=last, pass_name=pass_name),
+                                   detector=detector)  # fmt: skip
+            scene = poses.apply_to(read_sintel(root, name, first=first, last=last, size=size, pass_name=pass_name))
             speed, result = run(scene, Path(args.out) / window, "2d", args, video=False)
             # the detections on the GT pair's first frame, to judge them by eye (frame | GT flow | keypoints)
             first_gt = scene.metadata["frames"].index(scene.metadata["gt_pairs"][0][0])
             write_png(Path(args.out) / window / "keypoints_gt_pair.png", scene_preview(scene, first_gt))
-            row = {"scene": window, "found": int(poses.found().sum()), "frames": scene.num_frames,
+            boxes = 0 if poses.person_boxes is None else int((poses.person_boxes[:, 4] > 0).sum())
+            row = {"scene": window, "found": int(poses.found().sum()), "boxes": boxes, "frames": scene.num_frames,
                    "before": gt_pair_epe(result.initial_flows, scene), "after": gt_pair_epe(result.flows, scene),
                    "agreement": [result.history[0]["agreement_px"], result.history[-1]["agreement_px"]], "speed": speed,
                    "evidence": evidence(result)}  # fmt: skip
