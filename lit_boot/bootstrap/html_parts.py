@@ -37,8 +37,8 @@ h3 { font-size: 15px; margin: 18px 0 6px; } .meta { color: #555; margin: 0 0 12p
 .verdict p { background: #f4f7fb; border-left: 4px solid #4a78c2; padding: 8px 12px; margin: 8px 0; max-width: 1100px; }
 table { border-collapse: collapse; margin: 6px 0; font-size: 14px; }
 th, td { border: 1px solid #ddd; padding: 3px 8px; text-align: right; } th { background: #f2f2f2; }
-td.l, th.l { text-align: left; } td.better { color: #1a6b2a; font-weight: 600; }
-td.worse { color: #b3261e; font-weight: 600; }
+td { white-space: nowrap; } td.l, th.l { text-align: left; white-space: normal; }
+td.better { color: #1a6b2a; font-weight: 600; } td.worse { color: #b3261e; font-weight: 600; }
 .row { display: flex; flex-wrap: wrap; gap: 10px; margin: 4px 0 10px; }
 figure { margin: 0; } figcaption { font-size: 13px; color: #333; max-width: 340px; }
 figure img { display: block; image-rendering: pixelated; border: 1px solid #ccc; }

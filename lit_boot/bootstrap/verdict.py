@@ -17,8 +17,8 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
-from .pair_maps import CHANGED_PX, PairMaps
 from .metric_history import before_after
+from .pair_maps import CHANGED_PX, PairMaps
 
 __all__ = ["EvidenceTally", "certainty", "evidence_sentence", "gt_sentence", "TILE_PX"]
 
