@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -146,7 +147,8 @@ def test_a_real_demo_prints_its_stages_and_no_dependency_noise(shared, tmp_path,
         assert main(["demo", "--out", str(tmp_path / "demo"), "--frames", "2", "--height", "64", "--width", "96",
                      "--epochs", "1"]) == 0  # fmt: skip
     out, err = capfd.readouterr()
-    for header in ("stage 0/3 initial", "stage 1/3 flow_1", "stage 2/3 pose_1", "stage 3/3 flow_2"):
-        assert sum(line.startswith(f"[lit-boot] {header}: ") for line in out.splitlines()) == 1, (header, out)
+    for stage in ("initial", "flow_1", "pose_1", "flow_2"):  # numbered k/n: the preset may add stages (zoom)
+        headers = [line for line in out.splitlines() if re.match(rf"\[lit-boot\] stage \d+/\d+ {stage}: ", line)]
+        assert len(headers) == 1, (stage, out)
     assert not noise_in((out + err).splitlines() + seen), (out + err, seen)
     assert "| epe_person |" in out
