@@ -80,8 +80,9 @@ def _save_tensor(path: Path, state: dict[str, torch.Tensor]) -> None:
 class _RunState:
     """What a run carries from stage to stage: the current scene (its estimates the latest
     poses), flows (T-1, 2, H, W) px and PoseResult, the records so far, and the run's fixed
-    facts. ``initial`` is pretrained RAFT's flow, ``reference`` the flow the flow stages start
-    from and are checked against (RAFT's, or the zoom stage's)."""
+    facts. ``initial`` is pretrained RAFT's flow, ``reference`` the flow the next flow stage is
+    checked against and taught from: the last flow-making stage's (initial, zoom or flow), so
+    that a stage cannot undo what the one before it gained where the frames can tell."""
 
     scene: Scene
     initial_scene: Scene
@@ -308,8 +309,9 @@ class Bootstrap:
         if record["kind"] in ("flow", "zoom"):
             st.flows = read_flows(folder / "flows.npz")
             st.decisions = load_decisions(folder / "decisions.npz") if (folder / "decisions.npz").is_file() else None
+            st.reference = st.flows  # the next flow stage is checked against this stage's flow
             if record["kind"] == "zoom":
-                st.reference, st.zoom_kept = st.flows, st.decisions["kept"] > 0
+                st.zoom_kept = st.decisions["kept"] > 0
             else:
                 self.pending_weights = [folder / f"raft_{m}.pt" for m in range(len(self.models))]
         else:
@@ -353,8 +355,10 @@ class Bootstrap:
         self._save_stage(name, kind, flows, result, decisions)
         self.folder.write_record(name, record)
         st.flows, st.scene, st.result, st.decisions = flows, scene, result, decisions
+        if kind in ("zoom", "flow"):
+            st.reference = flows  # the next flow stage is checked against this stage's flow
         if kind == "zoom":
-            st.reference, st.zoom_kept = flows, decisions["kept"] > 0
+            st.zoom_kept = decisions["kept"] > 0
         st.history.append(record)
         st.seconds[name] = record["info"]["seconds"]
         log_stage_images(st.loggers, index, name, st.scene, st.flows, cfg.mode, st.decisions)
