@@ -17,7 +17,8 @@ Usage:
       [--sintel-size 218,512] [--flow '{"sketch": {"max_disagreement_px": 3}}']
       [--epochs N (default: the mode's)] [--pose-steps 1500] [--basketball-frames 16]
       [--basketball-resize 270] [--weights ../shared/checkpoints/raft-small.pth]
-      [--self-check off|photometric] [--gate] [--out /tmp/real_data] [--json out.json]
+      [--self-check off|photometric] [--gate] [--config JSON] [--detector PATH|none]
+      [--heldout-root ROOT] [--out /tmp/real_data] [--json out.json]
 The Sintel windows are every sample in ../shared (SINTEL); market_5's two windows are market_5
 and market_5b.
 """
@@ -63,9 +64,10 @@ def gt_pair_epe(flows: torch.Tensor, scene) -> dict[str, float]:
 def run(scene, out: Path, mode: str, args, video: bool) -> tuple[dict, object]:
     shutil.rmtree(out, ignore_errors=True)
     flow = {"weights": args.weights, **({"sketch": GATE} if args.gate else {}), **json.loads(args.flow)}
-    result = bootstrap(scene, out, mode=mode, flow=flow, flow_epochs=args.epochs,
-                       self_check={"method": args.self_check}, pose_steps=args.pose_steps, progress_bar=False,
-                       video=video)  # fmt: skip
+    config = json.loads(args.config)
+    check = {**config.pop("self_check", {}), **({"method": args.self_check} if args.self_check else {})}
+    result = bootstrap(scene, out, mode=mode, flow=flow, flow_epochs=args.epochs, self_check=check,
+                       pose_steps=args.pose_steps, progress_bar=False, video=video, **config)  # fmt: skip
     return speed_summary(result), result
 
 
@@ -103,7 +105,8 @@ def main() -> None:
     p.add_argument("--detector", default=str(SHARED / "checkpoints/yolox_nano.onnx"),
                    help="YOLOX person detector for the person's boxes ('none': MediaPipe's keypoints only)")
     p.add_argument("--flow", default="{}", help='FlowTTT options over the preset\'s, JSON: {"sketch": {"max_disagreement_px": 3}}')
-    p.add_argument("--sintel-size", default="218,512", help="H,W (the samples are 436,1024)")
+    p.add_argument("--config", default="{}", help="more BootstrapConfig options, JSON (e.g. '{\"zoom\": {\"method\": \"off\"}}')")
+    p.add_argument("--sintel-size", default="218,512", help="H,W (the samples are 436,1024) or full")
     p.add_argument("--epochs", type=int, default=None, help="flow epochs per stage (default: 50 in 2D, 8 in 3D)")
     p.add_argument("--pose-steps", type=int, default=1500)
     p.add_argument("--basketball-frames", type=int, default=16)
