@@ -19,6 +19,7 @@ import torch
 
 import lit_boot
 from lit_boot.bootstrap import bootstrap
+from lit_boot.bootstrap.finished import read_run
 from lit_boot.bootstrap.html_report import REPORT_HTML, write_report
 from lit_boot.bootstrap.overlay import nice_ceiling
 from lit_boot.bootstrap.pair_maps import CHANGED_PX, PairMaps, pick_pairs
@@ -77,6 +78,19 @@ def test_without_the_scene_it_shows_the_flows_and_says_what_is_missing(run: Path
     assert "census error, final flow" not in images(html)
     html = write_report(copy, run.parent / "scene", max_pairs=1).read_text()  # the scene given
     assert "census error, final flow" in images(html) and "frames were not found" not in html
+
+
+def test_every_run_ends_with_its_report_made_from_the_scene_it_started_from(run: Path, tmp_path: Path) -> None:
+    scene = lit_boot.make_scene(motion="run", frames=5, height=64, width=96, seed=0)
+    options = {**FAST, "flow": RANDOM_RAFT, "pose_ensemble": [str(run)], "zoom": {"method": "off"}}
+    result = bootstrap(scene, tmp_path / "run", **options)  # a Scene: summary.json names no folder
+    html = (tmp_path / "run" / REPORT_HTML).read_text()
+    assert "frames were not found" not in html and "census error, final flow" in images(html)
+    # the initial poses pictured are the run's: the ensemble averaged in once, not twice
+    shown = read_run(tmp_path / "run", result.initial_scene, ensembled=True).initial_points[0]
+    assert torch.equal(shown, result.initial_scene.pose_points("3d")[0])
+    twice = read_run(tmp_path / "run", result.initial_scene).initial_points[0]
+    assert not torch.allclose(twice, shown)
 
 
 def test_a_scene_of_another_size_is_refused(run: Path) -> None:
@@ -190,7 +204,8 @@ def test_a_dataset_run_links_its_scenes_reports(run: Path, tmp_path: Path, capsy
     out = tmp_path / "data"
     run_dataset(tasks, out, {**FAST, "flow": RANDOM_RAFT}, workers=0)
     index = (out / REPORT_HTML).read_text()
-    assert "a: no report" in index and "b: no report" in index  # the scene runs write their own (outputs.py)
+    for name in ("a", "b"):  # the scene runs wrote their own (outputs.py), linked at once
+        assert f'<a href="scenes/{name}/report.html">{name}</a>' in index
     assert main(["report", str(out), "--max_pairs", "1"]) == 0
     assert f"wrote {out / REPORT_HTML}" in capsys.readouterr().out
     index = (out / REPORT_HTML).read_text()

@@ -64,22 +64,26 @@ def read_summary(run_dir: str | os.PathLike) -> dict[str, Any]:
     return summary
 
 
-def _scene(summary: dict[str, Any], scene: Scene | str | os.PathLike | None, mode: str) -> Scene | None:
+def _scene(summary: dict[str, Any], scene: Scene | str | os.PathLike | None, mode: str, ensembled: bool) -> Scene | None:
     """The scene as the run started: ``scene`` (a Scene or folder), else the folder summary.json
-    names if it exists; with the run's pose ensemble averaged in. None when neither is known."""
+    names if it exists; with the run's pose ensemble averaged in (unless ``ensembled``: ``scene``
+    holds it already). None when neither is known."""
     if scene is None:
         named = Path(str(summary.get("scene", "")))
         if not str(summary.get("scene", "")) or not named.is_dir():
             return None
-        scene = named
+        scene, ensembled = named, False
     loaded = scene if isinstance(scene, Scene) else load_scene(scene)
-    return average_poses(loaded, summary.get("config", {}).get("pose_ensemble", []), mode)
+    return loaded if ensembled else average_poses(loaded, summary.get("config", {}).get("pose_ensemble", []), mode)
 
 
-def read_run(run_dir: str | os.PathLike, scene: Scene | str | os.PathLike | None = None) -> FinishedRun:
+def read_run(
+    run_dir: str | os.PathLike, scene: Scene | str | os.PathLike | None = None, *, ensembled: bool = False
+) -> FinishedRun:
     """Read the finished run in ``run_dir``; ``scene`` (a Scene or a scene folder) gives the
-    frames and initial poses when summary.json names no folder. A scene of another size than the
-    run's flows raises ValueError naming both."""
+    frames and initial poses when summary.json names no folder; ``ensembled``: its estimates
+    already hold the run's pose ensemble (the runner's ``initial_scene``), else it is averaged in.
+    A scene of another size than the run's flows raises ValueError naming both."""
     run_dir = Path(run_dir)
     summary = read_summary(run_dir)
     history = summary.get("stages", [])
@@ -92,7 +96,7 @@ def read_run(run_dir: str | os.PathLike, scene: Scene | str | os.PathLike | None
         folder = run_dir / "stages" / stage
         flows = read_flows(folder / "flows.npz")
         decisions = load_decisions(folder / "decisions.npz") if (folder / "decisions.npz").is_file() else None
-    loaded = _scene(summary, scene, mode)
+    loaded = _scene(summary, scene, mode, ensembled)
     final = None
     if loaded is not None:
         T, _, H, W = loaded.frames.shape

@@ -43,17 +43,19 @@ def write_report(
     *,
     max_pairs: int = 8,
     panel_width: int = 320,
+    ensembled: bool = False,
 ) -> Path:
     """Write ``run_dir``/report.html (atomically) for the finished run there; returns its path.
 
     ``scene`` (a Scene or a scene folder) gives the frames, initial poses and GT when summary.json
     names no scene folder (a run from a video or a Scene object); without either, the report
     shows the flows, their change and the decisions only, and says so. ``max_pairs``: pairs
-    pictured (evenly spaced; the table lists all); ``panel_width``: px per picture at most.
+    pictured (evenly spaced; the table lists all); ``panel_width``: px per picture at most;
+    ``ensembled``: ``scene``'s estimates already hold the run's pose ensemble (else averaged in).
     """
     if max_pairs < 1 or panel_width < 16:
         raise ValueError(f"write_report: expected max_pairs >= 1 and panel_width >= 16, got {max_pairs}, {panel_width}")
-    run = read_run(run_dir, scene)
+    run = read_run(run_dir, scene, ensembled=ensembled)
     return atomic_write_bytes(run.run_dir / REPORT_HTML, render_report(run, max_pairs, panel_width).encode())
 
 

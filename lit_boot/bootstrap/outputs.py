@@ -1,5 +1,5 @@
-"""A finished run's outputs: final flows, poses and weights, summary.json, the metrics plot and
-the overlay video (see :mod:`lit_boot.bootstrap.runner` for the folder layout)."""
+"""A finished run's outputs: final flows, poses and weights, summary.json, the metrics plot, the
+overlay video and report.html (see :mod:`lit_boot.bootstrap.runner` for the folder layout)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from ..data.atomic import atomic_write_bytes
 from ..data.flows import write_flows, write_flows_npz
 from .config import BootstrapConfig
 from .decisions import decision_summary
+from .html_report import write_report
 from .report import overlay_frames, plot_history, video_fps, write_video
 from .result import BootstrapResult
 
@@ -61,6 +62,7 @@ def write_outputs(
     plot_history(result.history, out / "metrics.png")
     if config.video:
         write_overlay_video(result, config.mode)
+    write_report(out, result.initial_scene, ensembled=True)  # last: it reads the files above
 
 
 def write_overlay_video(result: BootstrapResult, mode: str) -> None:

@@ -15,6 +15,7 @@ A run folder (the input scene folder is never written)::
     summary.json           settings, device, every metric per stage, timings, guard events
     metrics.png            the metrics per stage
     overlay.mp4            frame, flows (RAFT, refined, GT), EPE change, skeletons (overlay.py)
+    report.html            whether the video got better, and where (html_report.py; written last)
     logs/tensorboard/, logs/csv/   per stage (training curves) and "summary" (per stage)
 
 Faults. Every file is written atomically and a stage's stage.json last, so a run killed at any

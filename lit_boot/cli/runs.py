@@ -182,7 +182,6 @@ def demo(argv: list[str]) -> int:
     print(f"\nlit-boot demo: {scene.name}, {scene.num_frames} frames {scene.width}x{scene.height}; "
           "EPE in px (person = GT person mask, joints = at the GT joints), MPJPE in mm")  # fmt: skip
     print(result.table())
-    print(f"outputs in {result.run_dir} (summary.json, metrics.png, overlay.mp4; "
-          f"tensorboard --logdir {result.run_dir / 'logs' / 'tensorboard'}); "
-          f"lit-boot report {result.run_dir} writes report.html")  # fmt: skip
+    print(f"outputs in {result.run_dir} (report.html: open it in a browser; summary.json, metrics.png, overlay.mp4; "
+          f"tensorboard --logdir {result.run_dir / 'logs' / 'tensorboard'})")  # fmt: skip
     return 0
