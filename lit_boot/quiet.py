@@ -1,4 +1,6 @@
-"""Lightning's chatter off while lit-boot runs its own Trainers: :func:`quiet_lightning`.
+"""Lightning's chatter off while lit-boot runs its own Trainers: :func:`quiet_lightning`
+(every :meth:`~lit_boot.bootstrap.Bootstrap.run` is inside it), unless :func:`keep_lightning` or
+``LIT_BOOT_VERBOSE=1`` asks for all of it (``lit-boot --verbose``).
 
 Every Trainer lit-boot builds would otherwise print Lightning's start-up lines ("GPU available:
 ...", "TPU available: ...", a litlogger / litmodels tip, "`Trainer.fit` stopped: ...", "Seed set
@@ -12,11 +14,12 @@ Cheap to import: logging and warnings only.
 from __future__ import annotations
 
 import logging
+import os
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-__all__ = ["quiet_lightning", "LIGHTNING_INFO_LOGGERS", "KNOWN_WARNINGS"]
+__all__ = ["quiet_lightning", "keep_lightning", "LIGHTNING_INFO_LOGGERS", "KNOWN_WARNINGS"]
 
 #: Lightning loggers whose INFO records are noise to a lit-boot user (WARNING and up stay).
 LIGHTNING_INFO_LOGGERS = (
@@ -36,12 +39,32 @@ KNOWN_WARNINGS = (
 )
 
 
+_kept = 0  # how many keep_lightning() blocks are open
+
+
+@contextmanager
+def keep_lightning() -> Iterator[None]:
+    """Within the block, :func:`quiet_lightning` changes nothing: Lightning's info lines and every
+    warning show (``lit-boot --verbose``)."""
+    global _kept
+    _kept += 1
+    try:
+        yield
+    finally:
+        _kept -= 1
+
+
 @contextmanager
 def quiet_lightning() -> Iterator[None]:
     """Within the block: Lightning's info lines (:data:`LIGHTNING_INFO_LOGGERS`) are not logged,
     :data:`KNOWN_WARNINGS` are dropped, and every other warning from Lightning or torch* shows
     once per message (not once per Trainer). The loggers' levels and the warning filters are
-    restored after. Warnings' filters are process-wide: not for use from several threads at once."""
+    restored after. Nothing changes inside :func:`keep_lightning` or with ``LIT_BOOT_VERBOSE`` set
+    to anything but ""/"0". Warnings' filters are process-wide: not for use from several threads
+    at once."""
+    if _kept or os.environ.get("LIT_BOOT_VERBOSE", "") not in ("", "0"):
+        yield
+        return
     loggers = [logging.getLogger(name) for name in LIGHTNING_INFO_LOGGERS]
     levels = [logger.level for logger in loggers]
     with warnings.catch_warnings():

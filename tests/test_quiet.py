@@ -13,7 +13,7 @@ import warnings
 
 import pytest
 
-from lit_boot.quiet import LIGHTNING_INFO_LOGGERS, quiet_lightning
+from lit_boot.quiet import LIGHTNING_INFO_LOGGERS, keep_lightning, quiet_lightning
 
 NOISE = ("GPU available", "TPU available", "Tip", "litlogger", "deprecated", "Warning", "it/s", "Epoch", "%|")
 
@@ -48,8 +48,6 @@ def test_a_run_inside_quiet_lightning_prints_nothing_but_what_the_user_asks_for(
     assert not [line for line in lines if any(n in line for n in NOISE)], lines
 
 
-@pytest.mark.xfail(strict=True, reason="needs Bootstrap.run inside quiet_lightning() and progress_bar off by "
-                   "default from Python (runner.py / config.py, after the reshape; issue 26)")  # fmt: skip
 def test_a_plain_run_from_python_prints_nothing(tmp_path) -> None:
     done = run_python(tmp_path, """
         bootstrap(scene, "run", flow=RANDOM_RAFT, **FAST)
@@ -64,3 +62,17 @@ def test_quiet_lightning_restores_the_levels_and_filters() -> None:
     with quiet_lightning():
         assert logger.getEffectiveLevel() == logging.WARNING
     assert logger.level == level and warnings.filters == filters
+
+
+def test_keep_lightning_and_the_environment_keep_everything(monkeypatch) -> None:
+    logger = logging.getLogger(LIGHTNING_INFO_LOGGERS[0])
+    monkeypatch.setattr(logger, "level", logging.INFO)  # as Lightning sets it when imported
+    level = logging.INFO
+    with keep_lightning(), quiet_lightning():  # lit-boot --verbose
+        assert logger.getEffectiveLevel() == level
+    monkeypatch.setenv("LIT_BOOT_VERBOSE", "1")
+    with quiet_lightning():
+        assert logger.getEffectiveLevel() == level
+    monkeypatch.setenv("LIT_BOOT_VERBOSE", "0")
+    with quiet_lightning():
+        assert logger.getEffectiveLevel() == logging.WARNING

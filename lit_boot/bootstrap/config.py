@@ -250,7 +250,8 @@ class BootstrapConfig:
             before the drift guard acts.
         flow_format: flo (one Middlebury file per pair) or npz for the run's final flows.
         video: write overlay.mp4.
-        progress_bar: Lightning's progress bars.
+        progress_bar: Lightning's progress bars (off from Python; ``lit-boot bootstrap`` and the
+            demo turn them on).
         self_check: after each flow stage, without ground truth: keep the tuned flow only where
             the frames say it beats the flow it started from (:class:`SelfCheckConfig`:
             ``method`` None is the preset's; a dict of its fields is taken too).
@@ -278,7 +279,7 @@ class BootstrapConfig:
     drift_tolerance: float = 0.0
     flow_format: str = "flo"
     video: bool = True
-    progress_bar: bool = True
+    progress_bar: bool = False
     self_check: SelfCheckConfig = field(default_factory=SelfCheckConfig)
     zoom: ZoomConfig = field(default_factory=ZoomConfig)
     seed: int = 0

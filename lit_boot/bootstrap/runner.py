@@ -52,6 +52,7 @@ from ..data.flows import read_flows, write_flows_npz
 from ..flow import FlowTTT, person_region
 from ..metrics import scene_flow_metrics, scene_pose_metrics
 from ..pose import REFINERS, PoseResult, load_pose_result
+from ..quiet import quiet_lightning
 from .config import BootstrapConfig
 from .dashboard import log_stage_images, stage_header
 from .decisions import decision_summary, load_decisions, save_decisions, target_line
@@ -392,7 +393,12 @@ class Bootstrap:
 
     # --- the run -----------------------------------------------------------------------------------
     def run(self) -> BootstrapResult:
-        """Run (or resume) every stage; write the run's outputs; return the result."""
+        """Run (or resume) every stage; write the run's outputs; return the result. Lightning's
+        info lines and known warnings are off (:func:`~lit_boot.quiet.quiet_lightning`)."""
+        with quiet_lightning():
+            return self._run()
+
+    def _run(self) -> BootstrapResult:
         cfg = self.config
         self.folder.check(self._settings())  # nothing is written before inputs and settings are known good
         scene = self._inputs()

@@ -28,13 +28,13 @@ import re
 import sys
 import threading
 from collections.abc import Iterable, Iterator, Sequence
-from contextlib import contextmanager, nullcontext
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, get_type_hints
 
 import jsonargparse
 
-from ..quiet import quiet_lightning
+from ..quiet import keep_lightning, quiet_lightning
 
 __all__ = ["ArgumentParser", "CliError", "HelpFormatter", "Suggesting", "command_output", "dataclass_from",
            "drop_native_noise", "error_line", "is_user_error", "normalize_options", "plain", "refuse_to_overwrite",
@@ -195,7 +195,7 @@ def command_output(verbose: bool = False) -> Iterator[None]:
     ours.setLevel(logging.DEBUG if verbose else logging.INFO)
     ours.propagate = False
     was_verbose, _verbose = _verbose, verbose
-    with nullcontext() if verbose else quiet_lightning():
+    with keep_lightning() if verbose else quiet_lightning():
         try:
             yield
         finally:
