@@ -2,6 +2,8 @@
 
 - :class:`Bootstrap` / :func:`bootstrap`: run it into a run folder; returns a
   :class:`BootstrapResult` (refined scene, flows, poses, metrics per stage);
+- :class:`RunInterrupted`: what a run stopped by Ctrl-C raises (the last finished stage; a
+  rerun resumes after it);
 - :class:`BootstrapConfig`: its settings, with the ``paper`` and ``default`` presets
   (:data:`PRESETS`);
 - :mod:`~lit_boot.bootstrap.evaluate`: what is measured per stage without ground truth (the
@@ -14,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from .._lazy import lazy_attributes
 from .config import DRIFT_GUARDS, MODES, PRESETS, BootstrapConfig
+from .interrupt import RunInterrupted
 
 if TYPE_CHECKING:
     from .evaluate import agreement, drift
@@ -31,6 +34,7 @@ __all__ = [
     "Bootstrap",
     "BootstrapResult",
     "BootstrapConfig",
+    "RunInterrupted",
     "bootstrap",
     "PRESETS",
     "MODES",

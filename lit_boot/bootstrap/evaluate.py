@@ -20,13 +20,14 @@ EPE-like means pool every selected pixel (or joint) of every pair, not per pair 
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from ..core import inside_image
 from ..flow.evidence import photometric_error, track_error
 from ..metrics import epe_at_points, flow_errors
 
-__all__ = ["agreement", "drift", "photo_error", "pose_track_error"]
+__all__ = ["agreement", "drift", "person_height", "photo_error", "pose_track_error"]
 
 
 @torch.no_grad()
@@ -73,3 +74,14 @@ def pose_track_error(frames: torch.Tensor, points: torch.Tensor, keep: torch.Ten
         valid = valid[0] & keep[t] & keep[t + 1]
         total, count = total + float(error[0][valid].sum()), count + int(valid.sum())
     return total / count if count else float("nan")
+
+
+def person_height(points: torch.Tensor, keep: torch.Tensor) -> float:
+    """Median over frames of the vertical extent (px) of the kept pose points (``points`` (T, K, 2)
+    px, ``keep`` (T, K) bool); 0 if no frame keeps two."""
+    heights = []
+    for p, k in zip(points, keep):
+        if k.sum() >= 2:
+            y = p[k, 1]
+            heights.append(float(y.max() - y.min()))
+    return float(np.median(heights)) if heights else 0.0

@@ -114,6 +114,10 @@ class RunFolder:
         """Names of the stages with a stage.json."""
         return sorted(p.parent.name for p in (self.path / "stages").glob(f"*/{STAGE_JSON}"))
 
+    def finished(self, names: list[str]) -> list[str]:
+        """Those of ``names`` (in their order) with a stage.json."""
+        return [name for name in names if (self.stage_dir(name) / STAGE_JSON).is_file()]
+
     def record(self, name: str) -> dict[str, Any] | None:
         """Stage ``name``'s record (stage.json), None if it has not finished."""
         path = self.stage_dir(name) / STAGE_JSON

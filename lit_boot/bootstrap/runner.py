@@ -25,7 +25,9 @@ gradient or weight (:class:`~lit_boot.finite.FiniteGuard`), or whose output is n
 rolled back: its output is discarded, the previous stage's flows, poses and weights are kept
 (the final outputs are theirs), the stage's record in summary.json says ``rolled_back`` with a
 ``guard`` event ``{"guard": "finite", "what": ..., "step": ...}``, and the run stops, as the
-drift guard's ``rollback`` does (a rerun logs it again; ``overwrite`` tries again).
+drift guard's ``rollback`` does (a rerun logs it again; ``overwrite`` tries again). Ctrl-C stops
+a run with :class:`RunInterrupted` naming the last finished stage (:mod:`.interrupt`); a rerun
+logs which stages it loads instead of running them.
 """
 
 from __future__ import annotations
@@ -39,7 +41,6 @@ from pathlib import Path
 from typing import Any
 
 import lightning as L
-import numpy as np
 import torch
 from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
@@ -57,9 +58,10 @@ from .config import BootstrapConfig
 from .dashboard import log_stage_images, stage_header
 from .decisions import decision_summary, load_decisions, save_decisions, target_line
 from .ensemble import average_poses
-from .evaluate import agreement, drift, photo_error, pose_track_error
+from .evaluate import agreement, drift, person_height, photo_error, pose_track_error
 from .folder import STAGE_JSON, RunFolder
 from .guard import drift_guard, guard_text
+from .interrupt import RunInterrupted, interruptible
 from .lock import RunLock
 from .outputs import write_outputs
 from .result import BootstrapResult
@@ -67,7 +69,7 @@ from .selfcheck import check_stage, summary_line
 from .stages import fine_tune_flow, make_flow_model, predict_flows, quiet_refiner, refine_poses_stage
 from .zoom import box_masks, person_boxes, zoom_flows, zoom_line
 
-__all__ = ["Bootstrap", "BootstrapResult", "bootstrap", "STAGE_JSON"]
+__all__ = ["Bootstrap", "BootstrapResult", "RunInterrupted", "bootstrap", "STAGE_JSON"]
 
 log = logging.getLogger(__name__)
 
@@ -394,7 +396,9 @@ class Bootstrap:
     # --- the run -----------------------------------------------------------------------------------
     def run(self) -> BootstrapResult:
         """Run (or resume) every stage; write the run's outputs; return the result. Lightning's
-        info lines and known warnings are off (:func:`~lit_boot.quiet.quiet_lightning`)."""
+        info lines and known warnings are off (:func:`~lit_boot.quiet.quiet_lightning`); a rerun
+        logs which stages it loads; Ctrl-C raises :class:`~lit_boot.bootstrap.interrupt.RunInterrupted`
+        naming the last finished stage (see :mod:`~lit_boot.bootstrap.interrupt`)."""
         with quiet_lightning():
             return self._run()
 
@@ -403,22 +407,24 @@ class Bootstrap:
         self.folder.check(self._settings())  # nothing is written before inputs and settings are known good
         scene = self._inputs()
         L.seed_everything(cfg.seed, verbose=False)
-        person_px = _person_height(*scene.pose_points(cfg.mode))
+        person_px = person_height(*scene.pose_points(cfg.mode))
         self._build(person_px)
         with RunLock(self.out):
             self.folder.prepare(self._settings())
-            loggers = self._loggers("summary")  # rebuilt whole on every (resumed) run: no duplicates
-            st = _RunState(scene, scene, person_px, self._accelerator(), self._precision(), loggers)
-            self._initial_stage(st)
-            for index, name in enumerate(cfg.stages(), start=1):
-                record = self.folder.record(name)
-                if record is None:
-                    go_on = self._run_stage(st, index, name)
-                else:
-                    go_on = self._load_stage(st, index, name, record)
-                if not go_on:
-                    break
-            return self._finish(st)
+            stages = ["initial", *cfg.stages()]
+            if done := self.folder.finished(stages):
+                log.info(f"[lit-boot] resuming {self.out}: {', '.join(done)} already done (loaded, not run again)")
+            with interruptible(self.out, lambda: ([None, *self.folder.finished(stages)])[-1]):  # Ctrl-C
+                loggers = self._loggers("summary")  # rebuilt whole on every (resumed) run: no duplicates
+                st = _RunState(scene, scene, person_px, self._accelerator(), self._precision(), loggers)
+                self._initial_stage(st)
+                for index, name in enumerate(cfg.stages(), start=1):
+                    record = self.folder.record(name)
+                    go_on = self._run_stage(st, index, name) if record is None else \
+                        self._load_stage(st, index, name, record)  # fmt: skip
+                    if not go_on:
+                        break
+                return self._finish(st)
 
     def _finish(self, st: _RunState) -> BootstrapResult:
         """Log the per-stage metrics to the summary loggers; write the run's outputs."""
@@ -437,16 +443,6 @@ class Bootstrap:
         write_outputs(out, settings=self._settings(), guard_events=guard_events, accelerator=st.accelerator,
                       precision=st.precision, config=self.config)  # fmt: skip
         return out
-
-
-def _person_height(points: torch.Tensor, keep: torch.Tensor) -> float:
-    """Median over frames of the vertical extent (px) of the kept pose points (0 if none)."""
-    heights = []
-    for p, k in zip(points, keep):
-        if k.sum() >= 2:
-            y = p[k, 1]
-            heights.append(float(y.max() - y.min()))
-    return float(np.median(heights)) if heights else 0.0
 
 
 def bootstrap(scene: str | os.PathLike | Scene, out: str | os.PathLike | None = None, **options: Any) -> BootstrapResult:

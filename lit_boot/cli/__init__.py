@@ -28,8 +28,9 @@ own lines (its log records) and progress bars; Lightning's info lines and known 
 warnings are dropped (:mod:`.console`) unless ``lit-boot --verbose COMMAND ...`` or
 ``LIT_BOOT_VERBOSE=1``. A bad argument or input file is one ``lit-boot COMMAND: error: ...``
 line on stderr, naming the option or file, and exit status 2; an unknown option gets the closest
-known one ("did you mean"). Options are spelled with ``_`` or ``-`` alike (``--flow_epochs``,
-``--flow-epochs``).
+known one ("did you mean"). Ctrl-C is one line, ``lit-boot bootstrap: interrupted after flow_1;
+rerun the same command to resume`` (the run's last finished stage), and exit status 130.
+Options are spelled with ``_`` or ``-`` alike (``--flow_epochs``, ``--flow-epochs``).
 """
 
 from __future__ import annotations
@@ -95,9 +96,20 @@ def usage() -> str:
     )
 
 
+def interrupted_line(err: KeyboardInterrupt) -> str:
+    """What Ctrl-C stopped: ``interrupted after flow_1; rerun the same command to resume`` for a
+    run (:class:`~lit_boot.bootstrap.RunInterrupted`), else ``interrupted``."""
+    from ..bootstrap.interrupt import RunInterrupted  # signal and threading only
+
+    if isinstance(err, RunInterrupted):
+        return f"interrupted {err.where}; rerun the same command to resume"
+    return "interrupted"
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``lit-boot`` console script: exit status 0, or 2 with one error line
-    (``COMMAND --help`` exits through SystemExit(0), as argparse does)."""
+    """Entry point of the ``lit-boot`` console script: exit status 0, 2 with one error line, or
+    130 with one line after Ctrl-C (``COMMAND --help`` exits through SystemExit(0), as argparse
+    does)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     verbose = verbose_requested()
     if argv[:1] == ["--verbose"]:
@@ -114,6 +126,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with command_output(verbose):
             return command.load()(argv if command.with_name else argv[1:])
+    except KeyboardInterrupt as err:
+        sys.stdout.flush()
+        start = "\n" if sys.stderr.isatty() else ""  # off the line of ^C and a cut-off progress bar
+        print(f"{start}lit-boot {name}: {interrupted_line(err)}", file=sys.stderr)
+        return 130
     except Exception as err:
         if not is_user_error(err):
             raise
