@@ -97,6 +97,19 @@ def _weights_row(make: Callable[[Path], Path]) -> Callable[[Path, Path, pytest.M
     return build
 
 
+def _bootstrap_with(*extra: str) -> Callable[[Path, Path, pytest.MonkeyPatch], list[str]]:
+    def build(src: Path, out: Path, mp: pytest.MonkeyPatch) -> list[str]:
+        save_scene(_scene(), src / "scene")
+        return _bootstrap(src / "scene", out / "run", *extra)
+
+    return build
+
+
+def _text_file(path: Path) -> Path:
+    path.write_text("notes, not weights\n")
+    return path
+
+
 def _state_file(path: Path, state: dict) -> Path:
     torch.save(state, path)
     return path
@@ -238,6 +251,17 @@ ROWS = {
     "mismatched-frame-sizes": Row(_odd_sizes, (r"0001\.png: image of 50x40 px, but 0000\.png is 64x48 px",)),
     "weights-not-raft": Row(_weights_row(lambda s: _state_file(s / "foreign.pth", {"encoder.weight": torch.zeros(2)})),
                             (r"foreign\.pth: neither a torchvision RAFT state dict",)),
+    "weights-not-a-torch-file": Row(_weights_row(lambda s: _text_file(s / "notes.pth")),
+                                    (r"error: \S*in/notes\.pth: not a PyTorch weights file \(expected a torch\.save'd RAFT "
+                                     r"state dict such as raft-small\.pth; torch\.load failed with \w+\)$",)),
+    "weights-a-pickled-model": Row(_weights_row(lambda s: _state_file(s / "model.pth", torch.nn.Linear(2, 2))),
+                                   (r"model\.pth: holds pickled Python objects, not only tensors .*state_dict\(\)\)$",)),
+    "accelerator-unknown": Row(_bootstrap_with("--accelerator", "tpu"),
+                               (r"--accelerator: expected one of \('auto', 'cpu', 'cuda', 'gpu', 'mps'\), got 'tpu'",)),
+    "pose-accelerator-unknown": Row(_bootstrap_with("--pose_accelerator", "npu"), (r"--pose_accelerator: .*got 'npu'",)),
+    "precision-unknown": Row(_bootstrap_with("--precision", "16mixed"),
+                             (r"--precision: expected None .* 32-true, 16-mixed, bf16-mixed, .*got '16mixed'",)),
+    "flow-lr-zero": Row(_bootstrap_with("--flow.lr", "0"), (r"--flow\.lr: expected > 0, got 0",)),
     "raft-weights-other-size": Row(_weights_row(lambda s: _state_file(s / "large.pth", raft_large().state_dict())),
                                    (r"large\.pth: holds raft_large weights, but raft_small was asked for",)),
     "known-weights-name-other-bytes": Row(

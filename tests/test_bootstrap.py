@@ -61,11 +61,22 @@ def test_config_stages_and_presets():
 
 @pytest.mark.parametrize(
     "bad, word", [({"mode": "4d"}, "mode"), ({"preset": "x"}, "preset"), ({"cycles": -1}, "cycles"),
-                  ({"drift_guard": "x"}, "drift_guard"), ({"pose_steps": 0}, "pose_steps")],  # fmt: skip
+                  ({"drift_guard": "x"}, "drift_guard"), ({"pose_steps": 0}, "pose_steps"),
+                  ({"accelerator": "tpu"}, "^accelerator: "), ({"pose_accelerator": "cuda:0"}, "^pose_accelerator: "),
+                  ({"precision": "16mixed"}, "^precision: "), ({"precision": 16.0}, "^precision: "),
+                  ({"precision": True}, "^precision: ")],  # fmt: skip
 )
 def test_config_rejects_bad_values(bad, word):
     with pytest.raises(ValueError, match=word):
         BootstrapConfig(**bad)
+
+
+def test_config_takes_every_accelerator_and_lightning_precision():
+    for accelerator in ("auto", "cpu", "cuda", "gpu", "mps"):
+        assert BootstrapConfig(accelerator=accelerator, pose_accelerator=accelerator).accelerator == accelerator
+    for precision in (None, "32-true", "16-mixed", "bf16-mixed", "16-true", "bf16-true", "64-true", "32", "16", "bf16",
+                      "64", 32, 16, 64):  # fmt: skip
+        assert BootstrapConfig(precision=precision).precision == precision
 
 
 # --- measurements ------------------------------------------------------------------------------------

@@ -18,10 +18,16 @@ from typing import Any
 from .options import FlowOptions, PoseOptions, check_options
 
 
-__all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "SELF_CHECKS", "ZOOMS", "SelfCheckConfig", "ZoomConfig", "BootstrapConfig"]
+__all__ = ["PRESETS", "MODES", "DRIFT_GUARDS", "SELF_CHECKS", "ZOOMS", "ACCELERATORS", "PRECISIONS", "SelfCheckConfig",
+           "ZoomConfig", "BootstrapConfig"]
 
 MODES = ("3d", "2d")  # lit_boot.core.POSE_MODES, literal here: the CLI reads this module without torch
 DRIFT_GUARDS = ("record", "stop", "rollback")
+#: Lightning accelerators a run may name (auto: CUDA when available, else the CPU).
+ACCELERATORS = ("auto", "cpu", "cuda", "gpu", "mps")
+#: Lightning precisions (its short forms too: "16" is 16-mixed, "bf16" bf16-mixed, "32" / 32 32-true).
+PRECISIONS = ("32-true", "16-mixed", "bf16-mixed", "16-true", "bf16-true", "64-true", "32", "16", "bf16", "64", 32, 16,
+              64)
 #: The flow stages' self-check against the frames (see :mod:`lit_boot.bootstrap.selfcheck`).
 SELF_CHECKS = ("off", "photometric")
 #: The zoom stage (see :mod:`lit_boot.bootstrap.zoom`): off, or RAFT zoomed on the person.
@@ -237,10 +243,12 @@ class BootstrapConfig:
             "C_T_V1"}]): each network is fine-tuned alike and the flows are averaged (Table 2).
         pose_ensemble: extra refined-pose folders (poses.npz + pose_report.json, e.g. another
             estimator's joints in the same layout) averaged with the scene's estimates first.
-        accelerator: for the flow stages (auto: CUDA when available).
+        accelerator: for the flow stages: auto (CUDA when available, else the CPU), cpu, cuda,
+            gpu or mps.
         pose_accelerator: for the pose stages (a few thousand numbers: the CPU is faster).
-        precision: Lightning precision of the flow stages; None: the preset's on CUDA
-            (mixed), 32-true on CPU.
+        precision: Lightning precision of the flow stages (32-true, 16-mixed, bf16-mixed,
+            16-true, bf16-true, 64-true, or Lightning's short forms 32, 16, bf16, 64); None: the
+            preset's on CUDA (mixed), 32-true on CPU.
         drift_guard: after each stage its image evidence (no ground truth; see
             :mod:`lit_boot.bootstrap.guard`) is compared with the last stage's: a flow stage's
             census error of the frames warped by its flow, a pose stage's census error along
@@ -288,10 +296,14 @@ class BootstrapConfig:
         self.self_check = _nested("self_check", self.self_check, SelfCheckConfig)
         self.zoom = _nested("zoom", self.zoom, ZoomConfig)
         checks = [("mode", MODES), ("preset", tuple(PRESETS)), ("drift_guard", DRIFT_GUARDS),
-                  ("flow_format", ("flo", "npz"))]
+                  ("flow_format", ("flo", "npz")), ("accelerator", ACCELERATORS), ("pose_accelerator", ACCELERATORS)]
         for name, allowed in checks:
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name}: expected one of {allowed}, got {getattr(self, name)!r}")
+        precision = self.precision
+        if precision is not None and (type(precision) not in (str, int) or precision not in PRECISIONS):
+            raise ValueError(f"precision: expected None (the preset's) or a Lightning precision, one of "
+                             f"{', '.join(map(str, PRECISIONS[:10]))}; got {precision!r}")  # fmt: skip
         check_options("flow", self.flow, FlowOptions)
         check_options("pose", self.pose, PoseOptions)
         for i, member in enumerate(self.flow_ensemble):

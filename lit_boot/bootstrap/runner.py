@@ -172,8 +172,12 @@ class Bootstrap:
                 CSVLogger(root, name="csv", version=version)]
 
     def _accelerator(self) -> str:
+        """The flow stages' device kind: auto is CUDA when available, else the CPU; gpu is CUDA
+        when available, else MPS (as Lightning's)."""
         acc = self.config.accelerator
-        return ("cuda" if torch.cuda.is_available() else "cpu") if acc == "auto" else acc
+        if acc in ("auto", "gpu"):
+            return "cuda" if torch.cuda.is_available() else ("cpu" if acc == "auto" else "mps")
+        return acc
 
     def _precision(self) -> str:
         if self.config.precision is not None:

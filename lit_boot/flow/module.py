@@ -56,7 +56,7 @@ class FlowTTT(L.LightningModule):
             backpropagation: the earlier iterations run without gradient, and only the returned
             iterations are upsampled); None: through all (the authors).
         predict_updates: RAFT iterations for predictions and validation.
-        lr: Adam learning rate (the paper: 1e-5).
+        lr: Adam learning rate, > 0 (the paper: 1e-5).
         loss: final (SmoothL1 on the last prediction, as the authors) or sequence (RAFT's
             gamma-weighted loss over every update).
         gamma: decay of the sequence loss.
@@ -120,6 +120,8 @@ class FlowTTT(L.LightningModule):
         sketch: SketchConfig | None = None,
     ):
         super().__init__()
+        if not lr > 0:
+            raise ValueError(f"lr: expected > 0, got {lr}")
         if train_parts not in TRAIN_PARTS:
             raise ValueError(f"train_parts: expected one of {TRAIN_PARTS}, got {train_parts!r}")
         if grad_updates is not None and not 1 <= grad_updates <= train_updates:

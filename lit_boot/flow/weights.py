@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import os
 import re
+import warnings
 from pathlib import Path
 
 import torch
@@ -148,6 +149,15 @@ def check_known_hash(path: str | Path) -> None:
         )
 
 
+def _unloadable(path: Path, err: Exception) -> str:
+    """One line for a file torch.load(weights_only=True) refused (torch's own message, with its
+    advice to load untrusted pickles, is left out)."""
+    expected = "expected a torch.save'd RAFT state dict such as raft-small.pth"
+    if "Unsupported global" in str(err):  # a pickle of Python objects, e.g. a whole model
+        return f"{path}: holds pickled Python objects, not only tensors ({expected}: save model.state_dict())"
+    return f"{path}: not a PyTorch weights file ({expected}; torch.load failed with {type(err).__name__})"
+
+
 def load_state_dict_file(path: str | Path, arch: str) -> dict[str, torch.Tensor]:
     """Read a RAFT weights file in torchvision's or the original format; returns torchvision
     names. A file of neither format raises ``ValueError`` saying what was found; a known file
@@ -156,11 +166,13 @@ def load_state_dict_file(path: str | Path, arch: str) -> dict[str, torch.Tensor]
     if path.is_file():
         check_known_hash(path)
     try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # torch's note on a pickle protocol it did not write
+            warnings.filterwarnings("ignore", message="Detected pickle protocol", category=UserWarning)
+            state = torch.load(path, map_location="cpu", weights_only=True)
     except FileNotFoundError:
         raise FileNotFoundError(f"RAFT weights file {path} does not exist") from None
     except Exception as err:  # noqa: BLE001 - any unpickling failure is a bad file
-        raise ValueError(f"{path}: not a PyTorch weights file ({type(err).__name__}: {err})") from None
+        raise ValueError(_unloadable(path, err)) from None
     if isinstance(state, dict) and "state_dict" in state and isinstance(state["state_dict"], dict):
         state = state["state_dict"]
     if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
