@@ -257,3 +257,15 @@ def test_the_options_written_out_for_a_fast_help_agree_with_the_library():
     keys = [k for k in estimate if k in inspect.signature(estimate_poses).parameters and k != "video"]
     assert {"stride", "max_frames", "resize", "model_complexity", "min_detection_confidence", "on_jump"} <= set(keys)
     assert {k: estimate[k] for k in keys} == defaults(estimate_poses, keys)
+
+
+def test_output_cut_off_by_its_reader_ends_quietly():
+    """``lit-boot --help | head``: the reader went away before lit-boot wrote; no BrokenPipe traceback."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before lit-boot writes a byte
+    try:
+        done = subprocess.run([sys.executable, "-m", "lit_boot.cli", "--help"], stdout=write_end,
+                              stderr=subprocess.PIPE, text=True, timeout=120)  # fmt: skip
+    finally:
+        os.close(write_end)
+    assert (done.returncode, done.stderr) == (141, "")

@@ -35,7 +35,9 @@ Options are spelled with ``_`` or ``-`` alike (``--flow_epochs``, ``--flow-epoch
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import os
 import sys
 from argparse import ArgumentError
 from typing import Callable, NamedTuple
@@ -109,8 +111,20 @@ def interrupted_line(err: KeyboardInterrupt) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``lit-boot`` console script: exit status 0, 2 with one error line, or
     130 with one line after Ctrl-C (``COMMAND --help`` exits through SystemExit(0), as argparse
-    does)."""
-    argv = sys.argv[1:] if argv is None else list(argv)
+    does). Output cut off by its reader (``lit-boot --help | head``) ends it quietly, status 141
+    (128 + SIGPIPE, as the shells count it)."""
+    try:
+        try:
+            return _main(sys.argv[1:] if argv is None else list(argv))
+        finally:
+            sys.stdout.flush()  # a reader that went away shows here, not as a message at exit
+    except BrokenPipeError:
+        with contextlib.suppress(OSError, ValueError):  # nothing more reaches it, at exit neither
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+
+
+def _main(argv: list[str]) -> int:
     verbose = verbose_requested()
     if argv[:1] == ["--verbose"]:
         argv, verbose = argv[1:], True
@@ -126,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with command_output(verbose):
             return command.load()(argv if command.with_name else argv[1:])
+    except BrokenPipeError:
+        raise
     except KeyboardInterrupt as err:
         sys.stdout.flush()
         start = "\n" if sys.stderr.isatty() else ""  # off the line of ^C and a cut-off progress bar
