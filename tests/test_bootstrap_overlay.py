@@ -159,5 +159,6 @@ def test_decision_panel_replaces_the_frame_and_gets_a_legend_line() -> None:
     assert (panel[2, 25:, 40:] > panel[0, 25:, 40:]).all()  # tuned kept: blue tint
     assert (panel[0, 25:, :5] == panel[2, 25:, :5]).all()  # RAFT kept: grey
     assert torch.equal(grid(shown[0], 2)[0][1], grid(plain[0], 2)[0][1])  # the other panels as before
-    rows = _legend(4000, 400, 1.0, _key_rows(None, None, False)).shape[0]
-    assert _legend(4000, 400, 1.0, _key_rows(None, None, True)).shape[0] == rows + round(34 * 1.0)  # one more line
+    rows = _legend(4000, 400, 1.0, _key_rows(None, None, None)).shape[0]
+    with_decisions = _key_rows(None, None, {"painted": painted, "kept": kept})
+    assert _legend(4000, 400, 1.0, with_decisions).shape[0] == rows + round(34 * 1.0)  # one more line

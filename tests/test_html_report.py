@@ -19,12 +19,14 @@ import torch
 
 import lit_boot
 from lit_boot.bootstrap import bootstrap
+from lit_boot.bootstrap.decisions import DECISION_COLOURS, decision_map, final_decisions
 from lit_boot.bootstrap.finished import read_run
 from lit_boot.bootstrap.html_report import REPORT_HTML, write_report
-from lit_boot.bootstrap.overlay import nice_ceiling
+from lit_boot.bootstrap.overlay import _key_rows, nice_ceiling
 from lit_boot.bootstrap.pair_maps import CHANGED_PX, PairMaps, pick_pairs
 from lit_boot.bootstrap.verdict import EvidenceTally, certainty, evidence_sentence
 from lit_boot.cli import main
+from lit_boot.data.flows import read_flows
 
 RANDOM_RAFT = {"weights": None, "train_updates": 2, "predict_updates": 3}  # no weights file needed
 FAST = dict(flow_epochs=1, pose_steps=15, progress_bar=False, video=False, accelerator="cpu")
@@ -82,15 +84,76 @@ def test_without_the_scene_it_shows_the_flows_and_says_what_is_missing(run: Path
 
 def test_every_run_ends_with_its_report_made_from_the_scene_it_started_from(run: Path, tmp_path: Path) -> None:
     scene = lit_boot.make_scene(motion="run", frames=5, height=64, width=96, seed=0)
-    options = {**FAST, "flow": RANDOM_RAFT, "pose_ensemble": [str(run)], "zoom": {"method": "off"}}
+    options = {**FAST, "flow": RANDOM_RAFT, "pose_ensemble": [str(run)]}
     result = bootstrap(scene, tmp_path / "run", **options)  # a Scene: summary.json names no folder
     html = (tmp_path / "run" / REPORT_HTML).read_text()
     assert "frames were not found" not in html and "census error, final flow" in images(html)
     # the initial poses pictured are the run's: the ensemble averaged in once, not twice
-    shown = read_run(tmp_path / "run", result.initial_scene, ensembled=True).initial_points[0]
+    finished = read_run(tmp_path / "run", result.initial_scene, ensembled=True)
+    shown = finished.initial_points[0]
     assert torch.equal(shown, result.initial_scene.pose_points("3d")[0])
     twice = read_run(tmp_path / "run", result.initial_scene).initial_points[0]
     assert not torch.allclose(twice, shown)
+    # the run's decision maps (overlay, TensorBoard) and the report's, read back, are the same
+    assert set(result.decisions) == set(finished.decisions) == {"painted", "kept", "zoom"}
+    for key, value in result.decisions.items():
+        assert torch.allclose(value.float(), finished.decisions[key].float(), atol=1 / 255), key
+
+
+def test_the_zoom_stage_has_its_colour_its_table_and_its_columns(run: Path) -> None:
+    finished = read_run(run)
+    assert [r["stage"] for r in finished.history][:3] == ["initial", "zoom", "flow_1"]
+    zoom = finished.decisions["zoom"]
+    assert zoom.max() > 0 and (zoom + finished.decisions["kept"]).max() <= 1 + 1e-6  # shares of one pixel
+    html = write_report(run, max_pairs=2).read_text()
+    assert html.count("the zoomed flow kept (zoom stage)") == 2  # each pictured pair's decision legend
+    assert f"background: rgb{DECISION_COLOURS['zoom']}".replace(" ", "") in html.replace(" ", "")
+    zoom_table = html.split("<h3>The zoom stage</h3>")[1].split("</table>")[0]
+    record = next(r for r in finished.history if r["kind"] == "zoom")["info"]["zoom"]
+    scales = [p["scale"] for p in record["per_pair"] if p["region"] is not None]
+    assert f">{record['zoomed_pairs']} of 4<" in zoom_table and f">{min(scales):.3g}x" in zoom_table
+    assert f"{100 * record['kept_fraction']:.1f}%" in zoom_table
+    flow_table = html.split("<h3>The flow stages</h3>")[1].split("</table>")[0]
+    assert ">flow_1<" in flow_table and ">zoom<" not in flow_table  # the zoom is not a flow stage
+    every = html.split('id="every-pair"')[1]
+    assert "zoomed flow kept (of its region)" in every
+    assert every.count(f">{record['per_pair'][0]['scale']:.2f}x<") >= 1
+    assert "zoomed flow on " in html  # each pictured pair's line
+
+
+def test_decision_maps_say_where_the_final_flow_comes_from() -> None:
+    shape = (1, 1, 4)  # four pixels: RAFT's, the zoom's, flow_1's, flow_2's
+    zoom = {"painted": torch.zeros(shape, dtype=torch.bool), "kept": torch.tensor([[[0.0, 1, 1, 1]]])}
+    flow_1 = {"painted": torch.zeros(shape, dtype=torch.bool), "kept": torch.tensor([[[0.0, 0, 1, 0]]])}
+    flow_2 = {"painted": torch.tensor([[[False, False, False, True]]]), "kept": torch.tensor([[[0.0, 0, 0, 1]]])}
+    maps = None
+    for kind, own in (("zoom", zoom), ("flow", flow_1), ("pose", None), ("flow", flow_2)):
+        maps = final_decisions(maps, kind, own)
+    assert maps["zoom"].tolist() == [[[0.0, 1, 0, 0]]] and maps["kept"].tolist() == [[[0.0, 0, 1, 1]]]
+    assert maps["painted"].tolist() == [[[False, False, False, True]]]  # the last flow stage's target
+    assert "zoom" not in final_decisions(None, "flow", flow_1)  # without a zoom stage, no zoom share
+    frame = torch.full((3, 1, 4), 100, dtype=torch.uint8)
+    image = decision_map(frame, maps, 0).float()
+    grey = image[:, 0, 0]
+    for x, colour in ((1, "zoom"), (2, "kept")):  # each tinted 45% of the way to its own colour
+        assert torch.allclose(image[:, 0, x], grey + 0.45 * (torch.tensor(DECISION_COLOURS[colour]).float() - grey),
+                              atol=1)  # fmt: skip
+    assert image[:, 0, 3].tolist() == list(DECISION_COLOURS["painted"])
+    rows = [text for text, _ in _key_rows(None, None, maps)]
+    assert "magenta = the zoomed flow kept" in rows[-1]
+    assert "magenta" not in _key_rows(None, None, final_decisions(None, "flow", flow_1))[-1][0]
+
+
+def test_a_zoom_kept_after_a_rolled_back_flow_stage_is_the_final_flow(run: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    summary = json.loads((copy / "summary.json").read_text())
+    summary["stages"] = [{**r, "rolled_back": r["stage"] == "flow_1"} for r in summary["stages"][:3]]
+    (copy / "summary.json").write_text(json.dumps(summary))
+    finished = read_run(copy)
+    assert finished.flow_stage == "zoom"
+    assert torch.equal(finished.flows, read_flows(copy / "stages/zoom/flows.npz"))
+    assert finished.decisions["kept"].max() == 0 and finished.decisions["zoom"].max() == 1
 
 
 def test_a_scene_of_another_size_is_refused(run: Path) -> None:

@@ -9,7 +9,7 @@ from lightning.pytorch.loggers import TensorBoardLogger
 
 from ..core import Scene
 from ..data import draw_skeleton, flow_image
-from .decisions import decision_image
+from .decisions import decision_map
 
 __all__ = ["stage_header", "log_stage_images"]
 
@@ -24,7 +24,7 @@ def log_stage_images(
     loggers: list, step: int, stage: str, scene: Scene, flows: torch.Tensor, mode: str, decisions: dict | None = None
 ) -> None:
     """Add the middle pair's flow colour image, the current skeleton on its first frame and,
-    for a flow stage, its decision map (:func:`~lit_boot.bootstrap.decisions.decision_image`)
+    for a flow or zoom stage, the decision map (:func:`~lit_boot.bootstrap.decisions.decision_map`)
     (3, H, W uint8 each) to every TensorBoard logger, at ``step``, tagged by ``stage``."""
     tensorboards = [lg for lg in loggers if isinstance(lg, TensorBoardLogger)]
     if not tensorboards:
@@ -37,5 +37,5 @@ def log_stage_images(
         logger.experiment.add_image(f"flow/{stage}", flow_image(flows[t].float()), step)
         logger.experiment.add_image(f"skeleton/{stage}", skeleton, step)
         if decisions is not None and stage.startswith(("flow", "zoom")):
-            image = decision_image(scene.frames[t], decisions["painted"][t], decisions["kept"][t])
+            image = decision_map(scene.frames[t], decisions, t)
             logger.experiment.add_image(f"decisions/{stage}", image, step)

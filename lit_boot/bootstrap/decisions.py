@@ -1,11 +1,16 @@
 """What a run decided, and where: the pixels each flow stage's target painted (after the guards
-and the evidence gate), where its self-check kept the tuned flow, and the stages rolled back.
+and the evidence gate), where its self-check kept the tuned flow, where the zoom stage kept its
+zoomed flow, and the stages rolled back.
 
-- :func:`save_decisions` / :func:`load_decisions`: a flow stage's maps in
+- :func:`save_decisions` / :func:`load_decisions`: a flow or zoom stage's maps in
   ``stages/<stage>/decisions.npz`` (``painted`` (T-1, H, W) uint8 0/1; ``kept`` (T-1, H, W)
-  uint8, the tuned flow's weight x 255: all 255 without a self-check).
+  uint8, the stage's own flow's weight x 255: all 255 without a self-check; the zoom stage's
+  painted is all 0, its kept where the zoomed flow was kept).
+- :func:`final_decisions`: the stages' maps combined into where the run's flow comes from
+  (a tuned flow, the zoomed flow, RAFT's).
 - :func:`decision_summary`: the per-stage counts for summary.json and the dashboard.
-- :func:`decision_image`: one pair's maps drawn over its frame (the overlay video, TensorBoard).
+- :func:`decision_image` / :func:`decision_map`: one pair's maps drawn over its frame (the
+  overlay video, TensorBoard, the report), :func:`decision_key` their legend.
 - :func:`target_line`: what a flow stage's target painted, in one console line.
 """
 
@@ -20,11 +25,12 @@ import torch
 
 from ..data.atomic import atomic_write_bytes
 
-__all__ = ["save_decisions", "load_decisions", "decision_summary", "decision_image", "target_line",
-           "DECISION_COLOURS"]
+__all__ = ["save_decisions", "load_decisions", "final_decisions", "decision_summary", "decision_image",
+           "decision_map", "decision_key", "target_line", "DECISION_COLOURS"]
 
-#: RGB of the painted target pixels and of the regions where the tuned flow was kept.
-DECISION_COLOURS = {"painted": (255, 140, 0), "kept": (40, 110, 255)}
+#: RGB of the painted target pixels, of where a tuned flow was kept and of where the zoom stage's
+#: zoomed flow was kept (RAFT's flow: the frame in grey).
+DECISION_COLOURS = {"painted": (255, 140, 0), "kept": (40, 110, 255), "zoom": (225, 40, 200)}
 
 
 def save_decisions(path: str | os.PathLike, painted: torch.Tensor, kept: torch.Tensor) -> None:
@@ -40,6 +46,30 @@ def load_decisions(path: str | os.PathLike) -> dict[str, torch.Tensor]:
     """{"painted": (T-1, H, W) bool, "kept": (T-1, H, W) float in [0, 1]} from :func:`save_decisions`."""
     with np.load(path) as data:
         return {"painted": torch.from_numpy(data["painted"] > 0), "kept": torch.from_numpy(data["kept"]).float() / 255}
+
+
+def final_decisions(
+    previous: dict[str, torch.Tensor] | None, kind: str, maps: dict[str, torch.Tensor] | None
+) -> dict[str, torch.Tensor] | None:
+    """Where the run's flow comes from after a stage of ``kind`` whose own maps are ``maps``
+    (:func:`load_decisions`'), given ``previous`` (this function's result before it, None at
+    first): {"painted": (T-1, H, W) bool, the last flow stage's target; "kept": (T-1, H, W)
+    float in [0, 1], the share of a tuned flow; "zoom" (after a zoom stage only): the share of
+    the zoomed flow}; RAFT's flow has the rest. A flow stage keeps its tuned flow by its
+    ``kept`` and the flow before it elsewhere; the zoom stage's ``kept`` is its zoomed flow over
+    RAFT's. Other kinds, or no maps, leave ``previous`` as it is."""
+    if kind not in ("flow", "zoom") or maps is None:
+        return previous
+    weight = maps["kept"].float()
+    if kind == "zoom":
+        return {"painted": torch.zeros(weight.shape, dtype=torch.bool), "kept": torch.zeros_like(weight),
+                "zoom": weight}  # fmt: skip
+    out = {"painted": maps["painted"].bool(), "kept": weight}
+    if previous is not None:
+        out["kept"] = weight + (1 - weight) * previous["kept"]
+        if "zoom" in previous:
+            out["zoom"] = (1 - weight) * previous["zoom"]
+    return out
 
 
 def decision_summary(history: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -75,15 +105,34 @@ def decision_summary(history: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def decision_image(frame: torch.Tensor, painted: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
-    """Frame t (3, H, W) uint8 in grey, tinted blue by the tuned flow's weight ``kept`` (H, W)
-    in [0, 1], with the target's ``painted`` (H, W) bool pixels in orange on top: (3, H, W) uint8."""
+def decision_image(
+    frame: torch.Tensor, painted: torch.Tensor, kept: torch.Tensor, zoom: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Frame t (3, H, W) uint8 in grey, tinted magenta by the zoomed flow's share ``zoom`` and
+    blue by the tuned flow's ``kept`` ((H, W) floats in [0, 1]), with the target's ``painted``
+    (H, W) bool pixels in orange on top: (3, H, W) uint8 (:data:`DECISION_COLOURS`)."""
     grey = frame.float().mean(0, keepdim=True).expand(3, -1, -1) * 0.6 + 40
-    blue = torch.tensor(DECISION_COLOURS["kept"], dtype=torch.float32)[:, None, None]
-    orange = torch.tensor(DECISION_COLOURS["painted"], dtype=torch.float32)[:, None, None]
-    image = grey + 0.45 * kept.float()[None] * (blue - grey)
-    image = torch.where(painted[None], orange, image)
+    colour = {k: torch.tensor(v, dtype=torch.float32)[:, None, None] for k, v in DECISION_COLOURS.items()}
+    image = grey + 0.45 * kept.float()[None] * (colour["kept"] - grey)
+    if zoom is not None:
+        image = image + 0.45 * zoom.float()[None] * (colour["zoom"] - grey)
+    image = torch.where(painted[None], colour["painted"], image)
     return image.round().clamp(0, 255).byte()
+
+
+def decision_map(frame: torch.Tensor, decisions: dict[str, torch.Tensor], t: int) -> torch.Tensor:
+    """Pair ``t``'s :func:`decision_image` of ``decisions`` (a stage's maps or
+    :func:`final_decisions`') over ``frame`` (3, H, W) uint8."""
+    zoom = decisions.get("zoom")
+    return decision_image(frame, decisions["painted"][t], decisions["kept"][t], None if zoom is None else zoom[t])
+
+
+def decision_key(zoom: bool) -> list[tuple[tuple[int, int, int], str]]:
+    """The decision map's legend, (RGB, words) per colour; the zoom's row when ``zoom``."""
+    key = [(DECISION_COLOURS["painted"], "the target painted"), (DECISION_COLOURS["kept"], "a tuned flow kept")]
+    if zoom:
+        key.append((DECISION_COLOURS["zoom"], "the zoomed flow kept (zoom stage)"))
+    return key + [((120, 120, 120), "RAFT's flow kept (the frame in grey)")]
 
 
 def target_line(report: dict[str, float]) -> str:

@@ -1,8 +1,8 @@
 """A finished bootstrap run folder read back for the report: :func:`read_run`.
 
 What a run folder holds (see :mod:`lit_boot.bootstrap.runner`): summary.json (settings, every
-stage's record), ``stages/initial/flows.npz`` (pretrained RAFT's flow), each flow stage's
-``flows.npz`` and ``decisions.npz``, and the final ``poses.npz``. The frames and the initial
+stage's record), ``stages/initial/flows.npz`` (pretrained RAFT's flow), each flow and zoom
+stage's ``flows.npz`` and ``decisions.npz``, and the final ``poses.npz``. The frames and the initial
 poses are the scene's: the folder named in summary.json, or the scene passed in (a run made from
 a video or a Scene object names no folder).
 """
@@ -21,7 +21,7 @@ from ..core import Scene
 from ..data import load_scene
 from ..data.flows import read_flows
 from ..pose.result import POSES_FILE, load_pose_result
-from .decisions import load_decisions
+from .decisions import final_decisions, load_decisions
 from .ensemble import average_poses
 
 __all__ = ["FinishedRun", "read_run", "SUMMARY_JSON", "RUN_FORMAT"]
@@ -33,9 +33,11 @@ RUN_FORMAT = "lit-boot-bootstrap"
 @dataclass(kw_only=True)
 class FinishedRun:
     """A finished run: its folder and summary.json; the stage records (``history``); the mode;
-    pretrained RAFT's flow and the final flow (T-1, 2, H, W) px; the last kept flow stage's name
-    and decision maps (None without one); the scene as the run started (frames, initial poses,
-    GT; None when unknown) and the final pose points (T, K, 2) px with their (T, K) bool keep."""
+    pretrained RAFT's flow and the final flow (T-1, 2, H, W) px; the last kept flow or zoom
+    stage's name and where the final flow comes from (the kept stages' maps combined by
+    :func:`~lit_boot.bootstrap.decisions.final_decisions`; None without such a stage); the scene
+    as the run started (frames, initial poses, GT; None when unknown) and the final pose points
+    (T, K, 2) px with their (T, K) bool keep."""
 
     run_dir: Path
     summary: dict[str, Any]
@@ -89,13 +91,14 @@ def read_run(
     history = summary.get("stages", [])
     mode = summary.get("config", {}).get("mode", "3d")
     initial = read_flows(run_dir / "stages" / "initial" / "flows.npz")
-    kept = [r["stage"] for r in history if r.get("kind") == "flow" and not r.get("rolled_back")]
-    stage = kept[-1] if kept else None
+    kept = [r for r in history if r.get("kind") in ("flow", "zoom") and not r.get("rolled_back")]
+    stage = kept[-1]["stage"] if kept else None
     flows, decisions = initial, None
+    for record in kept:  # in run order: each stage's flow starts from the one before
+        maps = run_dir / "stages" / record["stage"] / "decisions.npz"
+        decisions = final_decisions(decisions, record["kind"], load_decisions(maps) if maps.is_file() else None)
     if stage is not None:
-        folder = run_dir / "stages" / stage
-        flows = read_flows(folder / "flows.npz")
-        decisions = load_decisions(folder / "decisions.npz") if (folder / "decisions.npz").is_file() else None
+        flows = read_flows(run_dir / "stages" / stage / "flows.npz")
     loaded = _scene(summary, scene, mode, ensembled)
     final = None
     if loaded is not None:

@@ -3,7 +3,8 @@ made its video better, built from the finished run folder alone (:func:`write_re
 
 From the top: what the ground truth says (when there is one) and what the frames say, in
 sentences with how sure they are (:mod:`~lit_boot.bootstrap.verdict`); every metric before and
-after, its change and which direction is better; what each flow stage decided; the metrics plot;
+after, its change and which direction is better; what each stage decided (the zoom stage: pairs
+zoomed, scales, where its flow was kept; the flow stages: painted, kept); the metrics plot;
 then, for up to ``max_pairs`` pairs evenly spaced, the frame with both skeletons, RAFT's flow and
 the final flow, the change between them, the census error of each flow and its change, the
 decision map, and with GT the end-point error maps (:mod:`~lit_boot.bootstrap.pair_maps`); last,
@@ -23,7 +24,7 @@ import torch
 from ..core import Scene
 from ..data.atomic import atomic_write_bytes
 from ..data.visualize import flow_image
-from .decisions import DECISION_COLOURS, decision_summary
+from .decisions import decision_key, decision_summary
 from .finished import FinishedRun, read_run
 from .html_parts import colour_bar, esc, img, page, swatches, table
 from .pair_maps import DIVERGING, SEQUENTIAL, Scales, pair_maps, pair_panels, pair_stats, pick_pairs, shared_scales
@@ -33,8 +34,6 @@ from .verdict import EvidenceTally, evidence_sentence, gt_sentence
 __all__ = ["write_report", "render_report", "REPORT_HTML"]
 
 REPORT_HTML = "report.html"
-_DECISION_KEY = ((DECISION_COLOURS["painted"], "the target painted"), (DECISION_COLOURS["kept"], "the tuned flow kept"),
-                 ((120, 120, 120), "RAFT's flow kept (the frame in grey)"))  # fmt: skip
 
 
 def write_report(
@@ -104,9 +103,36 @@ def _metrics_section(run: FinishedRun) -> str:
             f"<p class=\"note\">{esc(note)}</p>{picture}")
 
 
+def _zoom_record(run: FinishedRun) -> dict[str, Any] | None:
+    """The zoom stage's record, None without one."""
+    return next((r for r in run.history if r.get("kind") == "zoom"), None)
+
+
+def _span(values: list[float], unit: str) -> str:
+    return "" if not values else f"{min(values):.3g}{unit}" + (f"–{max(values):.3g}{unit}" if max(values) > min(values)
+                                                                else "")  # fmt: skip
+
+
+def _zoom_table(record: dict[str, Any], pairs: int) -> str:
+    """The zoom stage's decisions: pairs zoomed, their scales and motion, where its flow was kept, its cost."""
+    zoom = record.get("info", {}).get("zoom", {})
+    zoomed = [p for p in zoom.get("per_pair", []) if p.get("region") is not None]
+    kept = zoom.get("kept_fraction")
+    row = [(record["stage"], ""), (f"{zoom.get('zoomed_pairs', len(zoomed))} of {pairs}", ""),
+           (_span([p["scale"] for p in zoomed], "x"), ""), (_span([p["motion_px"] for p in zoomed], " px"), ""),
+           ("" if kept is None else f"{100 * kept:.1f}%", ""),
+           (_number(zoom.get("cost")), ""), ("yes", "worse") if record.get("rolled_back") else ("no", "")]  # fmt: skip
+    head = ["zoom stage", "pairs zoomed", "scale", "motion (p95 on the box)", "pixels keeping the zoomed flow",
+            "cost (RAFT passes)", "rolled back"]  # fmt: skip
+    return (f"<h3>The zoom stage</h3>{table(head, [row])}<p class=\"note\">RAFT again on a zoomed crop around the "
+            "person; its flow is kept only where it refines RAFT's and the frames confirm it. Per pair: the table "
+            "at the end.</p>")  # fmt: skip
+
+
 def _decisions_section(run: FinishedRun) -> str:
-    entries = decision_summary(run.history)
-    if not entries:
+    zoom = _zoom_record(run)
+    entries = [e for e in decision_summary(run.history) if zoom is None or e["stage"] != zoom["stage"]]
+    if not entries and zoom is None:
         return ""
 
     def share(value: Any) -> str:
@@ -118,7 +144,9 @@ def _decisions_section(run: FinishedRun) -> str:
              ("yes", "worse") if e["rolled_back"] else ("no", "")] for e in entries]  # fmt: skip
     head = ["flow stage", "pixels painted", "sketch kept by the gate", "bones rejected",
             "pixels keeping the tuned flow", "of the person", "rolled back"]  # fmt: skip
-    return f"<h2 id=\"decisions\">What each flow stage decided</h2>{table(head, rows)}"
+    zoom_part = _zoom_table(zoom, run.flows.shape[0]) if zoom is not None else ""
+    flow_part = f"<h3>The flow stages</h3>{table(head, rows)}" if rows else ""
+    return f"<h2 id=\"decisions\">What each stage decided</h2>{zoom_part}{flow_part}"
 
 
 def _wheel(scale: float, size: int = 56) -> np.ndarray:
@@ -130,12 +158,12 @@ def _wheel(scale: float, size: int = 56) -> np.ndarray:
     return wheel
 
 
-def _legend(key: str, scales: Scales) -> str:
-    """The legend under a picture of kind ``key``."""
+def _legend(key: str, scales: Scales, zoom: bool = False) -> str:
+    """The legend under a picture of kind ``key`` (``zoom``: the decision map has the zoom's colour)."""
     if key == "poses":
         return swatches((((255, 0, 0), "before (input)"), ((0, 255, 0), "after (refined)")))
     if key == "decisions":
-        return swatches(_DECISION_KEY)
+        return swatches(decision_key(zoom))
     if key == "flow":
         return (f'<div class="bar">{img(_wheel(scales.flow, 28), "flow colour wheel")}<span>hue = direction, white = '
                 f"still, full colour at {scales.flow:.2g} px and beyond</span></div>")  # fmt: skip
@@ -156,13 +184,15 @@ def _pair_section(run: FinishedRun, t: int, panels: list, stats: dict[str, float
     if math.isfinite(stats["epe_raft"]):
         parts.append(f"EPE {stats['epe_raft']:.3f} → {stats['epe_final']:.3f} px")
     if "painted" in stats:
-        parts.append(f"painted {100 * stats['painted']:.1f}%, tuned flow kept on {100 * stats['tuned_kept']:.1f}%")
+        parts.append(f"painted {100 * stats['painted']:.1f}%, tuned flow kept on {100 * stats['tuned_kept']:.1f}%"
+                     + (f", zoomed flow on {100 * stats['zoom_kept']:.1f}%" if "zoom_kept" in stats else ""))
+    zoom = run.decisions is not None and "zoom" in run.decisions
     rows = {}
     for panel in panels:
         zoom = max(1, width // panel.image.shape[1])  # small scenes shown larger, pixels kept sharp
         width_px = max(220, zoom * panel.image.shape[1])
         figure = (f'<figure style="width: {width_px}px">{img(panel.image, panel.title, zoom=zoom)}'
-                  f"<figcaption>{esc(panel.title)}{_legend(panel.legend, scales)}</figcaption></figure>")  # fmt: skip
+                  f"<figcaption>{esc(panel.title)}{_legend(panel.legend, scales, zoom)}</figcaption></figure>")  # fmt: skip
         rows.setdefault(panel.row, []).append(figure)
     names = {"flow": "Flow", "evidence": "Image evidence (no ground truth needed)", "gt": "Against the ground truth"}
     body = "".join(f"<h3>{names[row]}</h3><div class=\"row\">{''.join(figs)}</div>" for row, figs in rows.items())
@@ -170,8 +200,13 @@ def _pair_section(run: FinishedRun, t: int, panels: list, stats: dict[str, float
             f"{esc('; '.join(parts))}</p>{body}</section>")  # fmt: skip
 
 
-def _pairs_table(stats: dict[int, dict[str, float]]) -> str:
+def _pairs_table(stats: dict[int, dict[str, float]], zoom: dict[str, Any] | None) -> str:
+    """Every pair's numbers; after a zoom stage, its scale, the motion it was chosen from and the
+    share of the zoomed region that kept the zoomed flow."""
     head = ["pair", "flow changed", "census RAFT", "census final", "change", "EPE RAFT", "EPE final", "change"]
+    per_pair = zoom.get("info", {}).get("zoom", {}).get("per_pair", []) if zoom is not None else []
+    if zoom is not None:
+        head += ["zoom", "motion px", "zoomed flow kept (of its region)"]
     rows = []
     for t, s in stats.items():
         census = 100 * (s["census_final"] - s["census_raft"]) / s["census_raft"] if s["census_raft"] else math.nan
@@ -181,6 +216,12 @@ def _pairs_table(stats: dict[int, dict[str, float]]) -> str:
                      (_number(s["census_final"], 4), ""), (_pct(census), verdict.get(census < 0, "") if census else ""),
                      (_number(s["epe_raft"], 4), ""), (_number(s["epe_final"], 4), ""),
                      (_pct(epe), verdict.get(epe < 0, "") if epe else "")])  # fmt: skip
+        if zoom is not None:
+            p = per_pair[t] if t < len(per_pair) else {}
+            zoomed = p.get("region") is not None
+            rows[-1] += [(f"{p['scale']:.2f}x" if zoomed else "not zoomed", ""),
+                         (_number(p.get("motion_px")) if zoomed else "", ""),
+                         (f"{100 * p['kept_fraction']:.1f}%" if "kept_fraction" in p else "", "")]  # fmt: skip
     return f"<h2 id=\"every-pair\">Every pair</h2>{table(head, rows)}"
 
 
@@ -209,6 +250,6 @@ def render_report(run: FinishedRun, max_pairs: int = 8, panel_width: int = 320) 
     for t in sorted(shown):
         panels = pair_panels(run, t, maps[t], scales, panel_width)
         body.append(_pair_section(run, t, panels, stats[t], scales, panel_width))
-    body.append(_pairs_table(stats))
+    body.append(_pairs_table(stats, _zoom_record(run)))
     title = f"lit-boot report: {run.scene.name if run.scene is not None else run.run_dir.name}"
     return page(title, "\n".join(body))

@@ -16,7 +16,7 @@ from matplotlib import colormaps
 
 from ..core.joints import JointLayout, get_layout
 from ..data.visualize import draw_skeleton, flow_image
-from .decisions import decision_image
+from .decisions import decision_map
 
 __all__ = ["overlay_frames", "flow_colour_scale", "video_fps", "change_image", "draw_poses", "resize_image",
            "clean_flow", "nice_ceiling", "sequential_image", "CHANGE_CMAP"]
@@ -134,8 +134,8 @@ def _legend(width: int, panel: int, flow_scale: float, rows: list[tuple[str, tup
     return image
 
 
-def _key_rows(error_scale: float | None, evidence: tuple[float, float] | None, decisions: bool) -> list:
-    """The legend's rows after the flow line (see :func:`_legend`)."""
+def _key_rows(error_scale: float | None, evidence: tuple[float, float] | None, decisions: dict | None) -> list:
+    """The legend's rows after the flow line (see :func:`_legend`); ``decisions``: the maps drawn."""
     rows: list = [("pose before (input)", ("line", (255, 0, 0))), ("pose after (refined)", ("line", (0, 255, 0)))]
     if error_scale is not None:
         rows.append((f"+-{error_scale:.2g} px: EPE change vs GT, refined - RAFT (blue better, red worse, grey no GT)",
@@ -144,8 +144,9 @@ def _key_rows(error_scale: float | None, evidence: tuple[float, float] | None, d
         rows.append((f"0..{evidence[0]:g} px: change |refined - RAFT| (white: unchanged)", ("bar", CHANGE_CMAP)))
         rows.append((f"+-{evidence[1]:g} of 48: census error change, refined - RAFT (blue: the frames say better)",
                      ("bar", "RdBu_r")))  # fmt: skip
-    if decisions:
-        rows.append(("decisions: orange = the target painted, blue = the tuned flow kept (grey: RAFT's flow kept)",
+    if decisions is not None:
+        zoom = ", magenta = the zoomed flow kept" if "zoom" in decisions else ""
+        rows.append((f"decisions: orange = the target painted, blue = a tuned flow kept{zoom} (grey: RAFT's flow kept)",
                      None))  # fmt: skip
     return rows
 
@@ -236,8 +237,9 @@ def overlay_frames(
     vectors clipped to full colour; zero flow is white; the EPE change spans +-its 99th
     percentile |value|. Each panel has a text label; ``legend`` adds the key below (colour wheel
     and scale, skeleton colours, colour bars). ``decisions`` ({"painted": (T-1, H, W) bool,
-    "kept": (T-1, H, W) float}, see :mod:`~lit_boot.bootstrap.decisions`) replaces the top-left
-    frame with the decision map (:func:`~lit_boot.bootstrap.decisions.decision_image`). Panels
+    "kept": (T-1, H, W) float, optionally "zoom": (T-1, H, W) float}, see
+    :func:`~lit_boot.bootstrap.decisions.final_decisions`) replaces the top-left frame with the
+    decision map (:func:`~lit_boot.bootstrap.decisions.decision_map`). Panels
     are h x w = H x W, scaled down (INTER_AREA; joints scaled with them) when the mosaic's
     longer side would exceed ``max_side``. Raises ValueError naming the argument
     for a wrong shape.
@@ -262,7 +264,7 @@ def overlay_frames(
     flow_scale = flow_colour_scale(magnitudes)
     evidence = _evidence_column(frames, flows, (h, w)) if gt_flow is None else None
     scales = evidence[2:] if evidence is not None else None
-    rows = _key_rows(error_scale, scales, decisions is not None)
+    rows = _key_rows(error_scale, scales, decisions)
     key = _legend(cols * w, min(h, w), flow_scale, rows) if legend else None
     mosaics = []
     for t in range(T - 1):
@@ -275,7 +277,7 @@ def overlay_frames(
                       for name, k in zip(flow_labels, ("before", "after"))]  # fmt: skip
         first = _label(frame.numpy(), f"frame {t}")
         if decisions is not None:
-            image = decision_image(frames[t].detach().cpu(), decisions["painted"][t], decisions["kept"][t])
+            image = decision_map(frames[t].detach().cpu(), decisions, t)
             first = _label(resize(image), f"frame {t}: decisions")
         top = [first, _label(resize(before_img), labels[0])]
         bottom = [_label(pose.permute(1, 2, 0).numpy(), "pose before/after"), _label(resize(after_img), labels[1])]

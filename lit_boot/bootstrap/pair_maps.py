@@ -23,7 +23,7 @@ import torch
 
 from ..data.visualize import flow_image
 from ..flow.evidence import photometric_error
-from .decisions import decision_image
+from .decisions import decision_map
 from .finished import FinishedRun
 from .overlay import (CHANGE_CMAP, change_image, clean_flow, draw_poses, flow_colour_scale, nice_ceiling, resize_image,
                       sequential_image)  # fmt: skip
@@ -112,8 +112,9 @@ def pair_stats(maps: PairMaps, decisions: dict[str, torch.Tensor] | None, t: int
     """Pair ``t``'s numbers: ``changed`` (share of the pixels whose flow changed by more than
     :data:`CHANGED_PX`), the mean census error of each flow over the valid pixels
     (``census_raft``, ``census_final``) and over the changed ones (``*_changed``), the mean EPE of
-    each where the GT counts (``epe_raft``, ``epe_final``), and the shares ``painted`` and
-    ``tuned_kept`` (the tuned flow's mean weight) of the decision maps; NaN where not defined."""
+    each where the GT counts (``epe_raft``, ``epe_final``), and the shares ``painted``,
+    ``tuned_kept`` (the tuned flows' mean weight) and, after a zoom stage, ``zoom_kept`` (the
+    zoomed flow's) of the decision maps; NaN where not defined."""
     changed = maps.change > CHANGED_PX
     on = maps.valid & changed if maps.valid is not None else None
     stats = {"changed": float(changed.float().mean()),
@@ -124,6 +125,8 @@ def pair_stats(maps: PairMaps, decisions: dict[str, torch.Tensor] | None, t: int
     if decisions is not None:
         stats["painted"] = float(decisions["painted"][t].float().mean())
         stats["tuned_kept"] = float(decisions["kept"][t].float().mean())
+        if "zoom" in decisions:
+            stats["zoom_kept"] = float(decisions["zoom"][t].float().mean())
     return stats
 
 
@@ -168,7 +171,7 @@ def _poses_image(run: FinishedRun, t: int, size: tuple[int, int]) -> np.ndarray:
 def pair_panels(run: FinishedRun, t: int, maps: PairMaps, scales: Scales, width: int) -> list[Panel]:
     """Pair ``t``'s images, each ``width`` px wide at most (see :class:`Panel`): frame with both
     skeletons, RAFT's flow, the final flow, the change; the census error of each flow, its change
-    (final - RAFT) and the decision map; with GT, the EPE of each flow and its change."""
+    (final - RAFT) and the decision map (where the final flow comes from); with GT, the EPE of each flow and its change."""
     H, W = run.flows.shape[-2:]
     w = min(W, width)
     size = (max(1, round(H * w / W)), w)
@@ -194,7 +197,7 @@ def pair_panels(run: FinishedRun, t: int, maps: PairMaps, scales: Scales, width:
                    Panel("evidence", "census error change (final - RAFT)", "census_change", fit(delta))]  # fmt: skip
     if run.decisions is not None:
         frame = run.scene.frames[t] if run.scene is not None else torch.full((3, H, W), 160, dtype=torch.uint8)
-        image = decision_image(frame, run.decisions["painted"][t], run.decisions["kept"][t])
+        image = decision_map(frame, run.decisions, t)
         panels.append(Panel("evidence", f"decisions ({run.flow_stage})", "decisions", fit(image)))
     if maps.gt_valid is not None:
         epe = [sequential_image(m, scales.epe, SEQUENTIAL["epe"], maps.gt_valid)

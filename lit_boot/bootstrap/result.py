@@ -19,8 +19,9 @@ class BootstrapResult:
     """What a run gives: the refined scene (its estimates replaced by the refined poses), the
     initial and final flows (T-1, 2, H, W) px, the final PoseResult (None without a pose
     stage), one metrics record per stage (see :mod:`lit_boot.bootstrap.evaluate`), the run
-    folder, seconds per stage, the scene as the run started (initial estimates), and the last
-    flow stage's decision maps (see :mod:`lit_boot.bootstrap.decisions`; None without one)."""
+    folder, seconds per stage, the scene as the run started (initial estimates), and where the
+    final flow comes from: the last flow stage's target, the tuned and zoomed flows' shares
+    (:func:`~lit_boot.bootstrap.decisions.final_decisions`; None without a flow or zoom stage)."""
 
     run_dir: Path
     scene: Scene

@@ -56,7 +56,7 @@ from ..pose import REFINERS, PoseResult, load_pose_result
 from ..quiet import quiet_lightning
 from .config import BootstrapConfig
 from .dashboard import log_stage_images, stage_header
-from .decisions import decision_summary, load_decisions, save_decisions, target_line
+from .decisions import decision_summary, final_decisions, load_decisions, save_decisions, target_line
 from .ensemble import average_poses
 from .evaluate import agreement, drift, person_height, photo_error, pose_track_error
 from .folder import STAGE_JSON, RunFolder
@@ -86,7 +86,8 @@ class _RunState:
     poses), flows (T-1, 2, H, W) px and PoseResult, the records so far, and the run's fixed
     facts. ``initial`` is pretrained RAFT's flow, ``reference`` the flow the next flow stage is
     checked against and taught from: the last flow-making stage's (initial, zoom or flow), so
-    that a stage cannot undo what the one before it gained where the frames can tell."""
+    that a stage cannot undo what the one before it gained where the frames can tell;
+    ``decisions`` where the flow so far comes from (:func:`~.decisions.final_decisions`)."""
 
     scene: Scene
     initial_scene: Scene
@@ -316,10 +317,11 @@ class Bootstrap:
         folder = self.folder.stage_dir(name)
         if record["kind"] in ("flow", "zoom"):
             st.flows = read_flows(folder / "flows.npz")
-            st.decisions = load_decisions(folder / "decisions.npz") if (folder / "decisions.npz").is_file() else None
+            own = load_decisions(folder / "decisions.npz") if (folder / "decisions.npz").is_file() else None
+            st.decisions = final_decisions(st.decisions, record["kind"], own)
             st.reference = st.flows  # the next flow stage is checked against this stage's flow
             if record["kind"] == "zoom":
-                st.zoom_kept = st.decisions["kept"] > 0
+                st.zoom_kept = own["kept"] > 0
             else:
                 self.pending_weights = [folder / f"raft_{m}.pt" for m in range(len(self.models))]
         else:
@@ -362,7 +364,8 @@ class Bootstrap:
                 return False
         self._save_stage(name, kind, flows, result, decisions)
         self.folder.write_record(name, record)
-        st.flows, st.scene, st.result, st.decisions = flows, scene, result, decisions
+        st.flows, st.scene, st.result = flows, scene, result
+        st.decisions = final_decisions(st.decisions, kind, decisions)  # where the flow so far comes from
         if kind in ("zoom", "flow"):
             st.reference = flows  # the next flow stage is checked against this stage's flow
         if kind == "zoom":

@@ -96,6 +96,11 @@ def _self_checked(history: Sequence[dict[str, Any]]) -> bool:
     return any(r.get("kind") == "flow" and r.get("info", {}).get("self_check") for r in history)
 
 
+def _zoomed(history: Sequence[dict[str, Any]]) -> bool:
+    """A zoom stage that was kept: it keeps its flow only where the frames' census error is lower."""
+    return any(r.get("kind") == "zoom" and not r.get("rolled_back") for r in history)
+
+
 def _painted(history: Sequence[dict[str, Any]]) -> float:
     return max((r.get("info", {}).get("target", {}).get("target/painted_fraction", 0.0) or 0.0
                 for r in history if r.get("kind") == "flow"), default=0.0)  # fmt: skip
@@ -112,6 +117,8 @@ def evidence_sentence(tally: EvidenceTally, history: Sequence[dict[str, Any]]) -
             why = "the self-check kept RAFT's flow everywhere: the frames supported the tuned flow nowhere"
         else:
             why = "the tuned flow equals it"
+        if _zoomed(history):
+            why += "; the zoom stage's flow was kept nowhere either"
         text = (f"The final flow is RAFT's flow on every pixel (no pixel moved by more than {CHANGED_PX} px): {why}. "
                 "The run neither helped nor harmed the flow.")  # fmt: skip
     else:
@@ -124,9 +131,11 @@ def evidence_sentence(tally: EvidenceTally, history: Sequence[dict[str, Any]]) -
                 f"(of 48; {_pct(raft, final)}), lower in {tally.pairs_better} of the {tally.pairs_changed} pairs that "
                 f"changed. How sure: {certainty(tally.z)} ({tally.z:+.1f} standard errors over {tally.tiles} tiles of "
                 f"{TILE_PX}x{TILE_PX} px).")  # fmt: skip
-        if _self_checked(history):
-            text += (" Read it with care: the self-check kept the tuned flow only where this same error was lower, so "
-                     "a fall is partly by construction.")  # fmt: skip
+        checks = [what for what, used in (("the self-check kept the tuned flow", _self_checked(history)),
+                                           ("the zoom stage kept its zoomed flow", _zoomed(history))) if used]
+        if checks:
+            text += (f" Read it with care: {' and '.join(checks)} only where this same error was lower, so a fall is "
+                     "partly by construction.")  # fmt: skip
         text += (" The census error compares small neighbourhoods: it cannot tell a wrong motion onto similar "
                  "texture from the right one.")  # fmt: skip
     values = before_after(history)
