@@ -151,7 +151,7 @@ class ZoomConfig:
         border_px: the zoomed flow along the crop's inner edges (no context there) is not used.
         updates: RAFT iterations on the zoomed crop.
         max_change_px: the zoomed flow is kept only where it moves RAFT's flow by less than
-            this, px (8: one cell of RAFT's grid): a refinement, not another match.
+            this, px (16: two cells of RAFT's grid): a refinement, not another match.
         window: the box (px) over which each pixel's census errors are averaged.
         margin: how much lower (a fraction of RAFT's) the zoomed flow's averaged error must be;
             the pixel's own error must be lower too.
@@ -164,14 +164,14 @@ class ZoomConfig:
     max_scale: float = 2.0
     min_scale: float = 1.25
     reach_px: float = 60.0
-    context: float = 0.25
+    context: float = 0.5
     min_context_px: int = 16
     border_px: int = 8
     updates: int = 12
-    max_change_px: float = 8.0
+    max_change_px: float = 16.0
     window: int = 5
     margin: float = 0.02
-    teach: str = "confirmed"
+    teach: str = "off"
 
     def __post_init__(self) -> None:
         if self.teach not in ZOOM_TEACHING:

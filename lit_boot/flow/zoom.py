@@ -13,8 +13,7 @@ motion is large, RAFT at ``s`` times the size sees ``s`` times the displacement 
 - what is kept is decided from the frames, per pixel, by the orchestrator
   (:mod:`lit_boot.bootstrap.zoom`, whose ``ZoomConfig`` holds the settings), with
   :func:`refines` as one of its tests: the zoomed flow may move RAFT's flow by less than
-  ``max_change_px`` (one cell of RAFT's grid by default): a refinement within a cell, not
-  another match.
+  ``max_change_px`` (two cells of RAFT's grid by default): a refinement, not another match.
 
 Conventions: person boxes are (x0, y0, x1, y1, score) px with pixel centres at integer
 coordinates (:mod:`lit_boot.estimate.detector`; score 0 = nobody); crops and regions are
