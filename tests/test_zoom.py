@@ -206,3 +206,17 @@ def test_the_zoom_makes_rafts_flow_on_the_person_better(shared):
     assert kept.any()
     assert epe(flows, person) < 0.9 * epe(base, person)
     assert epe(flows, background) <= epe(base, background) * 1.01
+
+
+def test_the_command_line_spells_the_zoom_settings_nested(tmp_path):
+    from lit_boot.cli.console import dataclass_from
+    from lit_boot.cli.runs import bootstrap_parser
+
+    for config in ("configs/bootstrap.yaml", "configs/bootstrap_2d.yaml"):
+        args = bootstrap_parser().parse_args(["--config", config, "--data.scene", str(tmp_path), "--zoom.method", "off",
+                                              "--zoom.max_scale", "3", "--zoom.teach", "confirmed"])  # fmt: skip
+        parsed = dataclass_from(args, BootstrapConfig)
+        assert parsed.zoom == ZoomConfig(method="off", max_scale=3.0, teach="confirmed") and parsed.zooming == "off"
+        default = dataclass_from(bootstrap_parser().parse_args(["--config", config, "--data.scene", str(tmp_path)]),
+                                 BootstrapConfig)  # fmt: skip
+        assert default.zoom == ZoomConfig()  # the config files state the defaults
