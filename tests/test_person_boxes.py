@@ -76,3 +76,19 @@ def test_the_detector_finds_the_person_mediapipe_misses(shared):
     # she fills the right half of the frame (x about 400-990 of 1024, the whole height)
     assert (boxes[:, 0] > 300).all() and (boxes[:, 2] > 900).all() and (boxes[:, 3] - boxes[:, 1] > 350).all()
     assert est.metadata["detector_found"] == 2 and "the person detector's box in 2" in summary_line(est)
+
+
+@pytest.mark.shared
+@pytest.mark.skipif(importlib.util.find_spec("mediapipe") is None, reason='needs the mediapipe extra: pip install -e ".[mediapipe]"')
+def test_import_video_with_the_detector_stores_the_boxes(shared, tmp_path, capsys):
+    from lit_boot.cli import main
+
+    frames = shared / "data/videos/football_720p_10f"
+    out = tmp_path / "scene"
+    code = main(["import", "video", str(frames), "--max_frames", "2", "--resize", "240", "--estimate", "true",
+                 "--detector", str(shared / "checkpoints/yolox_nano.onnx"), "--out", str(out)])  # fmt: skip
+    assert code == 0
+    scene = lit_boot.load_scene(out)
+    assert scene.person_boxes is not None and scene.person_boxes.shape == (2, 5) and (scene.person_boxes[:, 4] > 0).all()
+    assert main(["import", "video", str(frames), "--detector", "yolox_nano", "--out", str(tmp_path / "x")]) == 2
+    assert "--detector: needs --estimate true" in capsys.readouterr().err
