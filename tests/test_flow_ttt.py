@@ -229,3 +229,36 @@ def test_plateau_stop_ends_a_fit_whose_loss_stopped_falling(scene, trainer):
     assert t.current_epoch == 4 and t.callback_metrics["train/loss_rel"] < 1.0  # still falling: runs on
     with pytest.raises(ValueError, match="plateau_patience: expected None or >= 1"):
         FlowTTT(weights=None, plateau_patience=0)
+
+
+def test_hold_consistent_holds_only_the_pixels_rafts_own_check_passes(scene, trainer):
+    from lit_boot.flow.evidence import forward_backward_check
+
+    model = FlowTTT(weights=None, hold="consistent", **FAST)
+    assert model.base_flows(scene)[1] is not None  # one more RAFT pass per pair, backward
+    base = torch.zeros(2, 2, 64, 96)
+    backward = torch.zeros(2, 2, 64, 96)
+    backward[:, 0, :, :40] = 5.0  # the left part fails the forward-backward check
+    report = model.targets_from(scene, base, backward, inputs=sketch_inputs(scene, "gt"))
+    expected = ~forward_backward_check(base, backward)[1]
+    assert torch.equal(model.held, expected) and 0 < report["target/held_fraction"] < 1
+    assert not model.held[:, :, :30].any() and model.held[:, 1:-1, 50:90].all()
+    seen = []
+    real = model.loss_fn.forward
+
+    def spy(flows, target, weight):
+        seen.append(weight.detach().cpu())
+        return real(flows, target, weight)
+
+    model.loss_fn.forward = spy
+    from torch.utils.data import DataLoader
+
+    from lit_boot.flow.data import ScenePairs
+
+    trainer(epochs=1).fit(model, DataLoader(ScenePairs(scene), batch_size=2))
+    weight = seen[0]
+    free = ~(model.sketch_masks | model.held)
+    assert free.any() and (weight[free] == 0).all()  # RAFT's flow fails its check there: no loss
+    assert (weight[model.held & ~model.sketch_masks] > 0).all()
+    with pytest.raises(ValueError, match="hold: expected one of"):
+        FlowTTT(weights=None, hold="some")

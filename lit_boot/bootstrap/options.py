@@ -54,6 +54,7 @@ class FlowOptions(TypedDict, total=False):
     freeze_batchnorm: bool
     crop_margin: int | None
     hold_weight: float
+    hold: str
     warm_start: bool
     paste_crop: bool
     plateau_patience: int | None

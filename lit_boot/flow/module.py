@@ -29,6 +29,7 @@ from ..metrics import EndPointError, FlowMetrics
 from ..optim import adam
 from .crops import crop_loss, person_region
 from .data import ScenePairs, SketchInputs, sketch_inputs
+from .evidence import forward_backward_check
 from .gate import gate_sketch
 from .losses import SketchLoss
 from .raft import load_raft, predict_flow
@@ -38,6 +39,9 @@ from .warm import TUNED_PARTS, WarmStart
 __all__ = ["FlowTTT"]
 
 TRAIN_PARTS = ("all", "update_block")
+#: Which unpainted pixels are held to the base flow: all (the paper), or only those whose base
+#: flow passes the forward-backward check (pseudo-labels; the others are free).
+HOLDS = ("all", "consistent")
 
 
 class FlowTTT(L.LightningModule):
@@ -78,6 +82,11 @@ class FlowTTT(L.LightningModule):
         hold_weight: in crop mode, weight of a second crop elsewhere in the frame whose target is
             the base flow, which holds the unseen rest of the frame in place (0: off; not used
             with ``warm_start``, where every prediction starts from the untuned flow).
+        hold: which unpainted pixels are held to the base flow: all (the paper), or consistent:
+            only those whose base flow passes the forward-backward check against RAFT's backward
+            flow (one more RAFT pass per pair): RAFT's confident flow as pseudo-labels (cf. Sun,
+            Harley and Guibas, "Refining Pre-Trained Motion Models", 2024), the rest left free
+            (no loss) where RAFT's flow fails its own check.
         warm_start: the fast fine-tune (:mod:`lit_boot.flow.warm`; needs
             ``train_parts="update_block"``): the frozen encoders' outputs and the untuned flow
             (``predict_updates`` iterations, also the target's base flow) are computed once per
@@ -113,6 +122,7 @@ class FlowTTT(L.LightningModule):
         freeze_batchnorm: bool = False,
         crop_margin: int | None = None,
         hold_weight: float = 1.0,
+        hold: str = "all",
         warm_start: bool = False,
         paste_crop: bool = True,
         plateau_patience: int | None = None,
@@ -124,6 +134,8 @@ class FlowTTT(L.LightningModule):
             raise ValueError(f"lr: expected > 0, got {lr}")
         if train_parts not in TRAIN_PARTS:
             raise ValueError(f"train_parts: expected one of {TRAIN_PARTS}, got {train_parts!r}")
+        if hold not in HOLDS:
+            raise ValueError(f"hold: expected one of {HOLDS}, got {hold!r}")
         if grad_updates is not None and not 1 <= grad_updates <= train_updates:
             raise ValueError(f"grad_updates: expected None or 1..{train_updates} (train_updates), got {grad_updates}")
         if plateau_patience is not None and plateau_patience < 1:
@@ -145,6 +157,7 @@ class FlowTTT(L.LightningModule):
                 p.requires_grad_(name.startswith(TUNED_PARTS))
         self.targets: torch.Tensor | None = None  # (P, 2, H, W) on CPU
         self.sketch_masks: torch.Tensor | None = None  # (P, H, W)
+        self.held: torch.Tensor | None = None  # (P, H, W) bool with hold="consistent": the unpainted pixels held
         self.scene: Scene | None = None  # the scene the targets were prepared for
         self.original: torch.Tensor | None = None  # (P, 2, H, W): the untuned network's prediction
         self.target_report: dict[str, float] = {}
@@ -179,7 +192,7 @@ class FlowTTT(L.LightningModule):
             base, updates = self.warm.build(scene.frames).base, self.hparams.predict_updates
         else:
             base = self._predict_all(scene, updates)
-        if self.sketch_config.gate != "photometric+fb":
+        if self.sketch_config.gate != "photometric+fb" and self.hparams.hold != "consistent":
             return base, None
         return base, self._predict_all(scene, updates, backward=True)
 
@@ -228,6 +241,10 @@ class FlowTTT(L.LightningModule):
                              flow=torch.where(confirmed[:, None], base.to(sketch.flow), sketch.flow))
         self.targets, self.sketch_masks, self.scene = target_flow(base, sketch), sketch.mask, scene
         report = {f"target/rejected_{k}": float(v) for k, v in sketch.rejected.items()}
+        self.held = None
+        if self.hparams.hold == "consistent":
+            self.held = ~forward_backward_check(base.float(), base_bw.float())[1].cpu()
+            report["target/held_fraction"] = self.held.float().mean().item()
         report.update({f"target/{k}": v for k, v in gated.items()})
         report["target/painted_fraction"] = sketch.mask.float().mean().item()
         gt = scene.gt
@@ -243,7 +260,7 @@ class FlowTTT(L.LightningModule):
         its datamodule's poses (the orchestrator's next flow stage, after the poses changed).
         The warm start's cache stays: the encoders are frozen and the untuned flow is the untuned
         network's."""
-        self.targets = self.sketch_masks = self.scene = self.original = None
+        self.targets = self.sketch_masks = self.scene = self.original = self.held = None
         if self.warm is not None:
             self.warm.boxes = None
 
@@ -321,6 +338,8 @@ class FlowTTT(L.LightningModule):
         target = self.targets[idx].to(self.device)
         mask = self.sketch_masks[idx].to(self.device)
         weight = self.loss_fn.weights(mask)
+        if self.held is not None:  # pseudo-labels: the unpainted pixels RAFT's own check passed
+            weight = weight * (mask | self.held[idx].to(self.device)).float()
         if self.warm is not None:
             loss = self.warm.loss(idx, target, weight)
             if loss is None:  # no pair of the batch has a box: nothing to learn here
