@@ -158,7 +158,7 @@ def test_a_stage_with_a_nan_is_rolled_back_and_recorded(stage, tiny_scene, tmp_p
     with pytest.warns(UserWarning, match="FiniteGuard: non-finite loss"):
         result = bootstrap(tiny_scene, run, flow=RANDOM_RAFT, **FAST)
     last = result.history[-1]
-    assert last["stage"] == stage and last["rolled_back"] and len(result.history) == 3 + (stage == "flow_2")
+    assert last["stage"] == stage and last["rolled_back"] and len(result.history) == 4 + (stage == "flow_2")
     step = 3 if stage == "pose_1" else 1
     assert last["guard"] == {"guard": "finite", "action": "rollback", "what": "loss", "step": step, "good_steps": step,
                              "value": "nan"}  # fmt: skip
@@ -178,7 +178,7 @@ def test_a_stage_with_a_nan_is_rolled_back_and_recorded(stage, tiny_scene, tmp_p
     assert not (run / "poses.npz").exists() and not (run / "stages/pose_1/poses.npz").exists()
     monkeypatch.undo()
     again = bootstrap(tiny_scene, run, flow=RANDOM_RAFT, **FAST)  # a rerun reprints: the record is kept
-    assert [r["stage"] for r in again.history] == ["initial", "flow_1", "pose_1"] and again.history[-1]["rolled_back"]
+    assert [r["stage"] for r in again.history] == ["initial", "zoom", "flow_1", "pose_1"] and again.history[-1]["rolled_back"]
 
 
 # --- bad input writes nothing; a failed run never blocks the corrected rerun -----------------------------
@@ -206,7 +206,7 @@ def test_bad_inputs_create_no_run_folder(tiny_scene, tmp_path):
             bootstrap(scene, run, **{**FAST, **options})
         assert not run.exists(), options
     result = bootstrap(tiny_scene, run, flow=RANDOM_RAFT, cycles=0, **FAST)  # the corrected rerun
-    assert [r["stage"] for r in result.history] == ["initial", "flow_1"]
+    assert [r["stage"] for r in result.history] == ["initial", "zoom", "flow_1"]
 
 
 def test_a_run_that_finished_no_stage_is_replaced_by_a_rerun_with_other_settings(tiny_scene, tmp_path, monkeypatch):
