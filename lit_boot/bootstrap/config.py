@@ -142,7 +142,9 @@ class ZoomConfig:
     Args:
         method: None (the preset's: person in default, off in paper), off, or person.
         max_scale: the largest upsampling of the crop.
-        min_scale: a pair whose scale would be below this is not zoomed (too little to gain).
+        min_scale: a pair whose scale would be below this is not zoomed: its motion is close to
+            RAFT's reach at the zoomed size, where the zoom does harm (market_5 at full size,
+            zoomed 1.25x: +1.7%; BENCHMARKS.md, "Resolution where the person is").
         reach_px: the largest zoomed motion, px: the scale is at most reach_px / the 95th
             percentile of RAFT's flow magnitude on the person's box (a zoomed displacement
             beyond RAFT's reach is a failure, not a refinement).
@@ -162,7 +164,7 @@ class ZoomConfig:
 
     method: str | None = None
     max_scale: float = 2.0
-    min_scale: float = 1.25
+    min_scale: float = 1.5
     reach_px: float = 60.0
     context: float = 0.5
     min_context_px: int = 16
