@@ -9,7 +9,7 @@ from lightning.pytorch.loggers import TensorBoardLogger
 
 from ..core import Scene
 from ..data import draw_skeleton, flow_image
-from .decisions import decision_map
+from .decisions import decision_map, decision_summary
 
 __all__ = ["stage_header", "log_stage_images"]
 
@@ -39,3 +39,16 @@ def log_stage_images(
         if decisions is not None and stage.startswith(("flow", "zoom")):
             image = decision_map(scene.frames[t], decisions, t)
             logger.experiment.add_image(f"decisions/{stage}", image, step)
+
+
+def log_summary(loggers: list, history: list[dict]) -> None:
+    """Log every stage's record (its float metrics as ``bootstrap/*``, its decisions as
+    ``decisions/*``) to the summary ``loggers``, one step per stage, and save them."""
+    for i, record in enumerate(history):
+        metrics = {f"bootstrap/{k}": v for k, v in record.items() if isinstance(v, float) and k != "cycle"}
+        for entry in decision_summary([record]):  # flow and zoom stages: what was painted, kept, rolled back
+            metrics.update({f"decisions/{k}": float(v) for k, v in entry.items() if isinstance(v, (int, float))})
+        for logger in loggers:
+            logger.log_metrics(metrics, step=i)
+    for logger in loggers:
+        logger.save()

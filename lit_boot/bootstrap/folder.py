@@ -10,6 +10,7 @@ cleared, even with ``overwrite``.
 
 from __future__ import annotations
 
+import io
 import json
 import logging
 import os
@@ -18,7 +19,11 @@ import uuid
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from ..data.atomic import atomic_write_bytes, remove_partials
+from ..data.flows import write_flows_npz
+from .decisions import save_decisions
 from .lock import LOCK_FILE
 
 __all__ = ["RunFolder", "CONFIG_JSON", "STAGE_JSON"]
@@ -133,6 +138,25 @@ class RunFolder:
         """Delete logs/{tensorboard,csv}/<version> (an interrupted attempt's, before a rerun)."""
         for kind in ("tensorboard", "csv"):
             shutil.rmtree(self.path / "logs" / kind / version, ignore_errors=True)
+
+    def save_stage(self, name: str, kind: str, *, flows: torch.Tensor | None, result: Any, decisions: dict | None,
+                   weights: list[dict[str, torch.Tensor]]) -> None:  # fmt: skip
+        """A finished stage's results in ``stages/<name>/``, each file atomic: a flow or zoom
+        stage's ``flows.npz`` (T-1, 2, H, W) px, ``decisions.npz`` and each ensemble member's
+        ``weights`` (``raft_<m>.pt``; none for the zoom stage), or a pose stage's ``result``
+        (a :class:`~lit_boot.pose.PoseResult`, its own files). stage.json is written after, by
+        :meth:`write_record`."""
+        folder = self.stage_dir(name)
+        folder.mkdir(parents=True, exist_ok=True)
+        if kind not in ("flow", "zoom"):
+            result.save(folder)
+            return
+        write_flows_npz(folder / "flows.npz", flows)
+        save_decisions(folder / "decisions.npz", decisions["painted"], decisions["kept"])
+        for m, state in enumerate(weights):
+            buffer = io.BytesIO()
+            torch.save(state, buffer)
+            atomic_write_bytes(folder / f"raft_{m}.pt", buffer.getvalue())
 
 
 def _differences(old: dict[str, Any], new: dict[str, Any]) -> list[str]:

@@ -32,7 +32,6 @@ logs which stages it loads instead of running them.
 
 from __future__ import annotations
 
-import io
 import logging
 import os
 import time
@@ -47,7 +46,6 @@ from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 from .._version import __version__
 from ..core import Scene
 from ..data import load_scene
-from ..data.atomic import atomic_write_bytes
 from ..finite import NonFiniteError
 from ..data.flows import read_flows, write_flows_npz
 from ..flow import FlowTTT, person_region
@@ -55,8 +53,8 @@ from ..metrics import scene_flow_metrics, scene_pose_metrics
 from ..pose import REFINERS, PoseResult, load_pose_result
 from ..quiet import quiet_lightning
 from .config import BootstrapConfig
-from .dashboard import log_stage_images, stage_header
-from .decisions import decision_summary, final_decisions, load_decisions, save_decisions, target_line
+from .dashboard import log_stage_images, log_summary, stage_header
+from .decisions import final_decisions, load_decisions, target_line
 from .ensemble import average_poses
 from .evaluate import agreement, drift, person_height, photo_error, pose_track_error
 from .folder import STAGE_JSON, RunFolder
@@ -67,17 +65,11 @@ from .outputs import write_outputs
 from .result import BootstrapResult
 from .selfcheck import check_stage, summary_line
 from .stages import fine_tune_flow, make_flow_model, predict_flows, quiet_refiner, refine_poses_stage
-from .zoom import box_masks, person_boxes, zoom_flows, zoom_line
+from .zoom import zoom_line, zoom_stage
 
 __all__ = ["Bootstrap", "BootstrapResult", "RunInterrupted", "bootstrap", "STAGE_JSON"]
 
 log = logging.getLogger(__name__)
-
-
-def _save_tensor(path: Path, state: dict[str, torch.Tensor]) -> None:
-    buffer = io.BytesIO()
-    torch.save(state, buffer)
-    atomic_write_bytes(path, buffer.getvalue())
 
 
 @dataclass
@@ -241,24 +233,13 @@ class Bootstrap:
 
     def _zoom_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], torch.Tensor, dict]:
         """RAFT (ensemble member 0, pretrained) on a zoomed crop around the person of every pair,
-        kept where the frames confirm it (:mod:`~lit_boot.bootstrap.zoom`); the record, the flows
-        (T-1, 2, H, W) px and the decision maps (nothing painted; kept: the zoomed flow's)."""
+        kept where the frames confirm it (:func:`~lit_boot.bootstrap.zoom.zoom_stage`)."""
         cfg = self.config
         log.info(stage_header(index, len(cfg.stages()), name, f"RAFT zoomed on the person, on {st.accelerator}"))
-        raft = self._model(0, st.person_px).raft
-        device = next(raft.parameters()).device
-        raft.to("cuda" if st.accelerator == "cuda" else "cpu")
-        boxes = person_boxes(st.scene, cfg.mode)
-        try:
-            flows, kept, zoom = zoom_flows(raft, st.scene, st.initial, boxes, cfg.zoom)
-        finally:
-            raft.to(device)
-        person = box_masks(boxes, tuple(flows.shape[-2:]))
-        record = {**scene_flow_metrics(st.scene.gt, flows), "drift_px": drift(flows, st.initial, person),
-                  "agreement_px": agreement(flows, *st.scene.pose_points(cfg.mode)),
-                  "photo_error": photo_error(st.scene.frames, flows), "info": {"zoom": zoom}}  # fmt: skip
-        log.info(zoom_line(zoom, flows.shape[0]))
-        return record, flows, {"painted": torch.zeros_like(kept), "kept": kept.float()}
+        record, flows, decisions = zoom_stage(self._model(0, st.person_px).raft, st.scene, st.initial, mode=cfg.mode,
+                                              config=cfg.zoom, device="cuda" if st.accelerator == "cuda" else "cpu")
+        log.info(zoom_line(record["info"]["zoom"], flows.shape[0]))
+        return record, flows, decisions
 
     def _pose_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], PoseResult, Scene]:
         """Refine the current poses against the current flows; the record, the result and the
@@ -362,7 +343,8 @@ class Bootstrap:
                 st.history.append(record)
                 log.warning(f"  drift guard: {guard_text(guard)}; {name} rolled back, run stopped")
                 return False
-        self._save_stage(name, kind, flows, result, decisions)
+        weights = [model.raft.state_dict() for model in self.models] if kind == "flow" else []
+        self.folder.save_stage(name, kind, flows=flows, result=result, decisions=decisions, weights=weights)
         self.folder.write_record(name, record)
         st.flows, st.scene, st.result = flows, scene, result
         st.decisions = final_decisions(st.decisions, kind, decisions)  # where the flow so far comes from
@@ -387,18 +369,6 @@ class Bootstrap:
         st.history.append(record)
         log.warning(f"  finite guard: {err}; {head['stage']} rolled back (its output discarded), run stopped")
         return False
-
-    def _save_stage(self, name: str, kind: str, flows: torch.Tensor, result: PoseResult | None, decisions) -> None:
-        """A finished stage's results (each file atomic): flows, weights and decision maps, or the poses."""
-        folder = self.folder.stage_dir(name)
-        folder.mkdir(parents=True, exist_ok=True)
-        if kind in ("flow", "zoom"):
-            write_flows_npz(folder / "flows.npz", flows)
-            save_decisions(folder / "decisions.npz", decisions["painted"], decisions["kept"])
-            for m, model in enumerate(self.models if kind == "flow" else []):
-                _save_tensor(folder / f"raft_{m}.pt", model.raft.state_dict())
-        else:
-            result.save(folder)
 
     # --- the run -----------------------------------------------------------------------------------
     def run(self) -> BootstrapResult:
@@ -435,14 +405,7 @@ class Bootstrap:
 
     def _finish(self, st: _RunState) -> BootstrapResult:
         """Log the per-stage metrics to the summary loggers; write the run's outputs."""
-        for i, record in enumerate(st.history):
-            metrics = {f"bootstrap/{k}": v for k, v in record.items() if isinstance(v, float) and k != "cycle"}
-            for entry in decision_summary([record]):  # flow stages: what was painted, kept, rolled back
-                metrics.update({f"decisions/{k}": float(v) for k, v in entry.items() if isinstance(v, (int, float))})
-            for logger in st.loggers:
-                logger.log_metrics(metrics, step=i)
-        for logger in st.loggers:
-            logger.save()
+        log_summary(st.loggers, st.history)
         guard_events = [{"stage": r["stage"], **r["guard"]} for r in st.history if "guard" in r]
         out = BootstrapResult(run_dir=self.out, scene=st.scene, initial_scene=st.initial_scene,
                               initial_flows=st.initial, flows=st.flows, poses=st.result, history=st.history,

@@ -26,11 +26,13 @@ from torchvision.models.optical_flow import RAFT
 
 from ..core import Scene
 from ..flow.evidence import photometric_error
+from ..metrics import scene_flow_metrics
 from ..flow.zoom import boxes_from_points, pair_boxes, refines, zoom_pair
 from .config import ZoomConfig
+from .evaluate import agreement, drift, photo_error
 from .selfcheck import CENSUS_RADIUS, choose_pixels
 
-__all__ = ["person_boxes", "box_masks", "zoom_flows", "zoom_line"]
+__all__ = ["person_boxes", "box_masks", "zoom_flows", "zoom_stage", "zoom_line"]
 
 
 def person_boxes(scene: Scene, mode: str) -> Tensor:
@@ -104,6 +106,27 @@ def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: Z
               "cost": round(sum(p["cost"] for p in per_pair), 4), "seconds": time.perf_counter() - start,
               "per_pair": per_pair}  # fmt: skip
     return flows, kept, record
+
+
+def zoom_stage(raft: RAFT, scene: Scene, initial: Tensor, *, mode: str, config: ZoomConfig,
+               device: str) -> tuple[dict[str, Any], Tensor, dict[str, Tensor]]:  # fmt: skip
+    """The zoom stage of a run: :func:`zoom_flows` with ``raft`` (moved to ``device`` for it, then
+    back) over ``initial`` (T-1, 2, H, W) px, the person's boxes from the scene or the pose of
+    ``mode``. Returns (the stage's record: the flow's metrics (GT when the scene has it, and the
+    evidence), drift outside the person's boxes, ``info["zoom"]``; the flows (T-1, 2, H, W) px;
+    the decision maps: nothing painted, ``kept`` the zoomed flow's pixels)."""
+    boxes = person_boxes(scene, mode)
+    original = next(raft.parameters()).device
+    raft.to(device)
+    try:
+        flows, kept, zoom = zoom_flows(raft, scene, initial, boxes, config)
+    finally:
+        raft.to(original)
+    person = box_masks(boxes, tuple(flows.shape[-2:]))
+    record = {**scene_flow_metrics(scene.gt, flows), "drift_px": drift(flows, initial, person),
+              "agreement_px": agreement(flows, *scene.pose_points(mode)),
+              "photo_error": photo_error(scene.frames, flows), "info": {"zoom": zoom}}  # fmt: skip
+    return record, flows, {"painted": torch.zeros_like(kept), "kept": kept.float()}
 
 
 def zoom_line(record: dict[str, Any], pairs: int) -> str:
