@@ -30,7 +30,7 @@ from pathlib import Path
 import torch
 
 from lit_boot.bootstrap.config import ZoomConfig
-from lit_boot.bootstrap.zoom import _keep
+from lit_boot.bootstrap.zoom import keep_pixels
 from lit_boot.data.readers import read_sintel
 from lit_boot.estimate import person_boxes
 from lit_boot.flow import load_raft, predict_flow
@@ -106,7 +106,7 @@ def main() -> None:
                 region = torch.zeros_like(valid)
                 region[y0:y1, x0:x1] = True
                 pair |= {scale: zoomed.candidate, f"region{scale}": region, "motion": zoomed.motion_px,
-                         f"census{scale}": _keep(frames, base, zoomed.candidate, zoomed.region,
+                         f"census{scale}": keep_pixels(frames, base, zoomed.candidate, zoomed.region,
                                                  ZoomConfig(max_change_px=1e9))}  # fmt: skip
             err_base = (base - gt).norm(dim=0)
             sums.setdefault("raft", [0.0, 0.0])

@@ -9,7 +9,7 @@ import torch
 import lit_boot
 from lit_boot.bootstrap import BootstrapConfig, bootstrap
 from lit_boot.bootstrap.config import ZoomConfig
-from lit_boot.bootstrap.zoom import _keep, box_masks, person_boxes, zoom_flows
+from lit_boot.bootstrap.zoom import box_masks, keep_pixels, person_boxes, zoom_flows
 from lit_boot.flow import zoom as flow_zoom
 from lit_boot.flow.zoom import boxes_from_points, pair_boxes, paste_region, refines, zoom_crop, zoom_pair, zoom_scale
 
@@ -121,17 +121,17 @@ def test_the_stage_keeps_a_confirmed_refinement_and_refuses_a_large_change():
     base[0, 20:70, 30:90] = 0.5  # RAFT's flow wrong on the person
     region = (20, 70, 30, 90)
     config = ZoomConfig()
-    keep = _keep(frames, base, truth, region, config)
+    keep = keep_pixels(frames, base, truth, region, config)
     assert keep[25:65, 40:80].float().mean() > 0.95  # confirmed by the frames, a change of 2.5 px
     assert not keep[:20].any() and not keep[:, :30].any()  # only within the region
     far = base.clone()
     far[0, 20:70, 30:90] = 3.0 + 16.0  # no better, and a change of 18.5 px
-    assert not _keep(frames, base, far, region, config).any()
+    assert not keep_pixels(frames, base, far, region, config).any()
     near = truth.clone()
     near[0, 20:70, 30:90] = 2.0  # 1 px off
     wrong = truth.clone()
     wrong[0, 20:70, 30:90] = 0.0  # a small change (2 px) to a worse flow: the frames refuse it
-    assert _keep(frames, near, wrong, region, config)[25:65, 40:80].float().mean() < 0.05
+    assert keep_pixels(frames, near, wrong, region, config)[25:65, 40:80].float().mean() < 0.05
 
 
 def test_zoom_flows_records_every_pair(monkeypatch):

@@ -32,7 +32,7 @@ from .config import ZoomConfig
 from .evaluate import agreement, drift, photo_error
 from .selfcheck import CENSUS_RADIUS, choose_pixels
 
-__all__ = ["person_boxes", "box_masks", "zoom_flows", "zoom_stage", "zoom_line"]
+__all__ = ["person_boxes", "box_masks", "keep_pixels", "zoom_flows", "zoom_stage", "zoom_line"]
 
 
 def person_boxes(scene: Scene, mode: str) -> Tensor:
@@ -56,7 +56,7 @@ def box_masks(boxes: Tensor, size: tuple[int, int]) -> Tensor:
     return masks
 
 
-def _keep(frames: Tensor, base: Tensor, candidate: Tensor, region: tuple[int, int, int, int],
+def keep_pixels(frames: Tensor, base: Tensor, candidate: Tensor, region: tuple[int, int, int, int],
           config: ZoomConfig) -> Tensor:  # fmt: skip
     """(H, W) bool: the region's pixels where the candidate (2, H, W) refines ``base`` and the
     frames (2, 3, H, W) confirm it (see the module doc)."""
@@ -96,7 +96,7 @@ def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: Z
                            updates=config.updates)  # fmt: skip
         record = zoomed.record()
         if zoomed.region is not None:
-            kept[t] = _keep(frames[t : t + 2], base[t], zoomed.candidate, zoomed.region, config)
+            kept[t] = keep_pixels(frames[t : t + 2], base[t], zoomed.candidate, zoomed.region, config)
             flows[t] = torch.where(kept[t], zoomed.candidate, base[t])
             y0, y1, x0, x1 = zoomed.region
             record["kept_fraction"] = round(float(kept[t, y0:y1, x0:x1].float().mean()), 4)
