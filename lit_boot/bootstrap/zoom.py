@@ -57,7 +57,7 @@ def box_masks(boxes: Tensor, size: tuple[int, int]) -> Tensor:
 
 
 def keep_pixels(frames: Tensor, base: Tensor, candidate: Tensor, region: tuple[int, int, int, int],
-          config: ZoomConfig) -> Tensor:  # fmt: skip
+                config: ZoomConfig) -> Tensor:  # fmt: skip
     """(H, W) bool: the region's pixels where the candidate (2, H, W) refines ``base`` and the
     frames (2, 3, H, W) confirm it (see the module doc)."""
     height, width = base.shape[-2:]
