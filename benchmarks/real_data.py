@@ -144,7 +144,7 @@ def main() -> None:
         if clip not in args.parts:
             continue
         scene = read_video(SHARED / "data/videos" / file, max_frames=frames, resize=resize)
-        poses = estimate_poses(scene)
+        poses = estimate_poses(scene, detector=detector)
         scene = poses.apply_to(scene)
         speed, result = run(scene, Path(args.out) / clip, mode, args, video=True)
         row = {"scene": clip, "mode": mode, "found": int(poses.found().sum()), "frames": scene.num_frames,
