@@ -4,7 +4,7 @@ Usage:
   python benchmarks/bootstrap_speed.py [--height 436 --width 1024 --frames 12] [--arch raft_small]
       [--weights ../shared/checkpoints/raft-small.pth] [--precision 16-mixed] [--train-updates 20]
       [--grad-updates 5] [--crop-margin 48] [--warm-start] [--lr 3e-5] [--flow JSON] [--mode 2d]
-      [--epochs 8] [--pose-steps 1500] [--repeats 3]
+      [--epochs 8] [--pose-steps 1500] [--repeats 3] [--config JSON]
 
 The preset's FlowTTT options hold unless given. ``--repeats N`` runs the method N times in this
 process and reports the run with the median ratio, with every run's ratio in "ratios": the RAFT
@@ -53,6 +53,7 @@ def main() -> None:
     p.add_argument("--epochs", type=int, default=None, help="per flow stage (default: the mode's, 8 in 3D, 50 in 2D)")
     p.add_argument("--pose-steps", type=int, default=1500)
     p.add_argument("--repeats", type=int, default=1, help="runs; the one with the median ratio is reported")
+    p.add_argument("--config", default="{}", help="more BootstrapConfig options, JSON (e.g. '{\"zoom\": {\"method\": \"off\"}}')")
     args = p.parse_args()
     scene = make_scene(motion="run", frames=args.frames, height=args.height, width=args.width, seed=0)
     flow = {"arch": args.arch, "weights": args.weights}
@@ -66,7 +67,8 @@ def main() -> None:
     for _ in range(args.repeats):
         with tempfile.TemporaryDirectory() as tmp:
             result = bootstrap(scene, Path(tmp) / "run", flow=flow, mode=args.mode, flow_epochs=args.epochs,
-                               pose_steps=args.pose_steps, precision=args.precision, progress_bar=False, video=False)  # fmt: skip
+                               pose_steps=args.pose_steps, precision=args.precision, progress_bar=False, video=False,
+                               **json.loads(args.config))  # fmt: skip
         runs.append((speed_summary(result), result))
     runs.sort(key=lambda run: run[0]["ratio_to_raft"])
     speed, result = runs[len(runs) // 2]
