@@ -99,7 +99,8 @@ def main() -> None:
             for scale in SCALES if box is not None else ():
                 zoomed = zoom_pair(model, frames[0], frames[1], base, box, max_scale=scale, min_scale=scale,
                                    reach_px=1e9, context=config.context, min_context_px=config.min_context_px,
-                                   border_px=config.border_px, updates=args.updates)  # fmt: skip
+                                   border_px=config.border_px, min_updates=args.updates,
+                                   max_updates=args.updates)  # fmt: skip
                 if zoomed.region is None:
                     continue
                 y0, y1, x0, x1 = zoomed.region

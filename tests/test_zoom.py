@@ -15,7 +15,8 @@ from lit_boot.flow.zoom import boxes_from_points, pair_boxes, paste_region, refi
 
 RANDOM_RAFT = {"weights": None, "train_updates": 2, "predict_updates": 3}
 FAST = dict(flow_epochs=1, pose_steps=15, progress_bar=False, video=False)
-ZOOM = dict(max_scale=2.0, min_scale=1.25, reach_px=60.0, context=0.25, min_context_px=16, border_px=8, updates=12)
+ZOOM = dict(max_scale=2.0, min_scale=1.25, reach_px=60.0, context=0.25, min_context_px=16, border_px=8, min_updates=8,
+            max_updates=16)
 
 
 def test_boxes_from_points_bound_the_counted_points_and_mark_nobody():
@@ -51,6 +52,17 @@ def test_the_scale_keeps_the_zoomed_motion_within_reach():
     base[0] = 55.0  # 60 / 55 < 1.25: not zoomed
     assert zoom_scale(base, box, max_scale=2.0, min_scale=1.25, reach_px=60.0)[0] == 1.0
     assert zoom_scale(torch.zeros(2, 10, 10), box, max_scale=2.0, min_scale=1.25, reach_px=60.0)[0] == 2.0
+
+
+def test_the_iterations_grow_with_the_zoomed_motion_in_cells():
+    from lit_boot.flow.zoom import zoom_updates
+
+    assert zoom_updates(2.0, 0.0, min_updates=8, max_updates=16) == 8
+    assert zoom_updates(2.0, 3.9, min_updates=8, max_updates=16) == 9  # 7.8 px zoomed: one cell
+    assert zoom_updates(2.0, 4.1, min_updates=8, max_updates=16) == 10  # 8.2 px: into a second cell
+    assert zoom_updates(1.5, 40.0, min_updates=8, max_updates=16) == 16  # 60 px: capped
+    with pytest.raises(ValueError, match="zoom.max_updates"):
+        ZoomConfig(updates=12, max_updates=10)
 
 
 def test_paste_region_drops_the_crops_inner_edges_only():
@@ -90,6 +102,7 @@ def test_zoom_pair_pastes_the_zoomed_flow_into_its_region_only(monkeypatch):
     base = torch.zeros(2, 120, 200)
     pair = zoom_pair(torch.nn.Linear(1, 1), frames[0], frames[1], base, torch.tensor([60.0, 40.0, 100.0, 80.0]), **ZOOM)
     assert pair.scale == 2.0 and pair.crop == (24, 97, 44, 117) and pair.region == (32, 89, 52, 109)
+    assert pair.updates == 8 and pair.record()["updates"] == 8  # no motion: the fewest iterations
     y0, y1, x0, x1 = pair.region
     assert (pair.candidate[:, y0:y1, x0:x1] == 1).all()
     assert pair.candidate.sum() == 2 * (y1 - y0) * (x1 - x0)  # nothing outside the region

@@ -151,7 +151,9 @@ class ZoomConfig:
         context: the crop's margin around the person's box, as a fraction of its larger side.
         min_context_px: the smallest margin, px.
         border_px: the zoomed flow along the crop's inner edges (no context there) is not used.
-        updates: RAFT iterations on the zoomed crop.
+        updates: the fewest RAFT iterations on the zoomed crop; one more per cell of RAFT's
+            grid (8 px) the zoomed motion spans, at most ``max_updates``.
+        max_updates: the most RAFT iterations on the zoomed crop.
         max_change_px: the zoomed flow is kept only where it moves RAFT's flow by less than
             this, px (16: two cells of RAFT's grid): a refinement, not another match.
         window: the box (px) over which each pixel's census errors are averaged.
@@ -169,7 +171,8 @@ class ZoomConfig:
     context: float = 0.5
     min_context_px: int = 16
     border_px: int = 8
-    updates: int = 12
+    updates: int = 8
+    max_updates: int = 16
     max_change_px: float = 16.0
     window: int = 5
     margin: float = 0.02
@@ -186,7 +189,8 @@ class ZoomConfig:
         for name in ("reach_px", "max_change_px", "context"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"zoom.{name}: expected > 0, got {getattr(self, name)}")
-        for name, least in (("min_context_px", 0), ("border_px", 0), ("updates", 1), ("window", 1)):
+        for name, least in (("min_context_px", 0), ("border_px", 0), ("updates", 1), ("window", 1),
+                            ("max_updates", self.updates)):
             if getattr(self, name) < least:
                 raise ValueError(f"zoom.{name}: expected >= {least}, got {getattr(self, name)}")
         if not 0 <= self.margin < 1:

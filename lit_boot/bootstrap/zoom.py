@@ -93,7 +93,7 @@ def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: Z
         zoomed = zoom_pair(model, frames[t], frames[t + 1], base[t], box, max_scale=config.max_scale,
                            min_scale=config.min_scale, reach_px=config.reach_px, context=config.context,
                            min_context_px=config.min_context_px, border_px=config.border_px,
-                           updates=config.updates)  # fmt: skip
+                           min_updates=config.updates, max_updates=config.max_updates)  # fmt: skip
         record = zoomed.record()
         if zoomed.region is not None:
             kept[t] = keep_pixels(frames[t : t + 2], base[t], zoomed.candidate, zoomed.region, config)

@@ -32,8 +32,8 @@ from torchvision.models.optical_flow import RAFT
 
 from .raft import predict_flow
 
-__all__ = ["boxes_from_points", "pair_boxes", "zoom_crop", "zoom_scale", "zoomed_flow", "paste_region", "refines",
-           "ZoomedPair", "zoom_pair"]
+__all__ = ["boxes_from_points", "pair_boxes", "zoom_crop", "zoom_scale", "zoom_updates", "zoomed_flow",
+           "paste_region", "refines", "ZoomedPair", "zoom_pair"]
 
 Region = tuple[int, int, int, int]
 
@@ -88,6 +88,13 @@ def zoom_scale(base: Tensor, box: Tensor, *, max_scale: float, min_scale: float,
     return (scale if scale >= min_scale else 1.0), motion
 
 
+def zoom_updates(scale: float, motion: float, *, min_updates: int, max_updates: int) -> int:
+    """RAFT iterations for a crop zoomed ``scale`` times whose motion is ``motion`` px: one more
+    than ``min_updates`` per cell of RAFT's grid (8 px) the zoomed motion spans, at most
+    ``max_updates`` (a small motion converges in a few iterations, a large one needs more)."""
+    return min(max_updates, min_updates + math.ceil(scale * motion / 8))
+
+
 def _resize(image: Tensor, size: tuple[int, int]) -> Tensor:
     """(C, h, w) -> (C, *size), bilinear (the values' dtype kept; uint8 rounded)."""
     out = F.interpolate(image[None].float(), size=size, mode="bilinear", align_corners=False)[0]
@@ -130,8 +137,9 @@ def refines(base: Tensor, zoomed: Tensor, max_change_px: float) -> Tensor:
 class ZoomedPair:
     """One pair's zoom: the candidate flow (2, H, W) px (``base`` with the zoomed flow pasted
     into ``region``; ``base`` itself when not zoomed), the scale (1.0: not zoomed), the motion
-    it was chosen from (px), the crop and the pasted region (y0, y1, x0, x1) px or None, and
-    the zoomed pixels as a fraction of the frame's (the zoom's cost relative to RAFT's)."""
+    it was chosen from (px), the crop and the pasted region (y0, y1, x0, x1) px or None, the
+    zoomed pixels as a fraction of the frame's (the zoom's cost relative to RAFT's) and the RAFT
+    iterations run on them (0: not zoomed)."""
 
     candidate: Tensor
     scale: float
@@ -139,20 +147,21 @@ class ZoomedPair:
     crop: Region | None
     region: Region | None
     cost: float
+    updates: int = 0
 
     def record(self) -> dict:
-        """JSON-ready: scale, motion, crop, region, cost."""
+        """JSON-ready: scale, motion, crop, region, cost, updates."""
         return {"scale": round(self.scale, 4), "motion_px": round(self.motion_px, 3), "crop": self.crop,
-                "region": self.region, "cost": round(self.cost, 4)}  # fmt: skip
+                "region": self.region, "cost": round(self.cost, 4), "updates": self.updates}  # fmt: skip
 
 
 def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Tensor | None, *, max_scale: float,
               min_scale: float, reach_px: float, context: float, min_context_px: int, border_px: int,
-              updates: int) -> ZoomedPair:  # fmt: skip
+              min_updates: int, max_updates: int) -> ZoomedPair:  # fmt: skip
     """The zoom of one pair: frames (3, H, W) uint8, ``base`` (2, H, W) px RAFT's own flow, the
     pair's person box (4,) or None (nobody: not zoomed); the scale from :func:`zoom_scale`, the
-    crop from :func:`zoom_crop`, pasted into :func:`paste_region` (``border_px``), ``updates``
-    RAFT iterations on the zoomed crop. See :class:`ZoomedPair`."""
+    crop from :func:`zoom_crop`, pasted into :func:`paste_region` (``border_px``), the RAFT
+    iterations on the zoomed crop from :func:`zoom_updates`. See :class:`ZoomedPair`."""
     size = tuple(base.shape[-2:])
     if box is None:
         return ZoomedPair(base, 1.0, 0.0, None, None, 0.0)
@@ -162,9 +171,10 @@ def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Te
     ry0, ry1, rx0, rx1 = region
     if scale == 1.0 or ry0 >= ry1 or rx0 >= rx1:
         return ZoomedPair(base, 1.0, motion, None, None, 0.0)
+    updates = zoom_updates(scale, motion, min_updates=min_updates, max_updates=max_updates)
     flow = zoomed_flow(model, frame1, frame2, crop, scale, updates)
     candidate = base.clone()
     y0, _, x0, _ = crop
     candidate[:, ry0:ry1, rx0:rx1] = flow[:, ry0 - y0 : ry1 - y0, rx0 - x0 : rx1 - x0].to(candidate)
     cost = (crop[1] - crop[0]) * (crop[3] - crop[2]) * scale**2 / (size[0] * size[1])
-    return ZoomedPair(candidate, scale, motion, crop, region, cost)
+    return ZoomedPair(candidate, scale, motion, crop, region, cost, updates)
