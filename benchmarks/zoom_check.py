@@ -47,19 +47,20 @@ def windows(heldout_root: Path) -> dict[str, tuple]:
     return out
 
 
-def rules(pair: dict) -> dict[str, torch.Tensor | None]:
-    """Rule -> the zoomed flow's pixels kept (H, W) bool, or None (not zoomed)."""
+def rules(pair: dict) -> dict[str, tuple[torch.Tensor, float] | None]:
+    """Rule -> (the zoomed flow's pixels kept (H, W) bool, the scale whose zoomed flow they take),
+    or None (not zoomed)."""
     base, out = pair["base"], {}
     for scale in SCALES:
         cand = pair.get(scale)
         if cand is None:
             continue
-        census, tag = pair[f"census{scale}"], "" if scale == 2.0 else "@1.5"
-        out["zoom" + tag] = pair[f"region{scale}"]
-        out["census" + tag] = census
+        census, region, tag = pair[f"census{scale}"], pair[f"region{scale}"], "" if scale == 2.0 else "@1.5"
+        out["zoom" + tag] = (region, scale)
+        out["census" + tag] = (census, scale)
         for d in (4.0, 8.0, 16.0):
-            out[f"refine<{d:g}{tag}"] = refines(base, cand, d) & pair[f"region{scale}"]
-            out[f"census&refine<{d:g}{tag}"] = census & refines(base, cand, d)
+            out[f"refine<{d:g}{tag}"] = (refines(base, cand, d) & region, scale)
+            out[f"census&refine<{d:g}{tag}"] = (census & refines(base, cand, d), scale)
     for reach in (40.0, 60.0, 80.0):
         pick = next((s for s in SCALES if s * pair["motion"] <= reach and pair.get(s) is not None), None)
         out[f"R<{reach:g}"] = None if pick is None else (pair[f"census{pick}"] & refines(base, pair[pick], 8.0), pick)
@@ -113,11 +114,11 @@ def main() -> None:
             sums.setdefault("raft", [0.0, 0.0])
             sums["raft"][0] += float(err_base[valid].sum())
             sums["raft"][1] += float(valid.sum())
-            for name, keep in rules(pair).items():
-                scale = 2.0
-                if isinstance(keep, tuple):
-                    keep, scale = keep
-                err = err_base if keep is None else torch.where(keep, (pair[scale] - gt).norm(dim=0), err_base)
+            for name, rule in rules(pair).items():
+                err = err_base
+                if rule is not None:
+                    keep, scale = rule
+                    err = torch.where(keep, (pair[scale] - gt).norm(dim=0), err_base)
                 acc = sums.setdefault(name, [0.0, 0.0])
                 acc[0] += float(err[valid].sum())
                 acc[1] += float(valid.sum())
