@@ -44,6 +44,9 @@ def test_the_current_results_come_first_and_the_check_catches_a_changed_figure()
     assert headings[:2] == ["# Benchmarks", "## Current results"]
     assert "No GPU figure has been" in current_results(benchmarks)
     readme = (ROOT / "README.md").read_text()
-    assert unsourced(readme.replace("-24.3%", "-25.3%"), benchmarks) == {"-25.3%"}
+    quoted = sorted(f for f in figures(readme) if f.endswith("%"))[0]  # a figure the README quotes
+    changed = f"{quoted[:-1]}01%"  # one more digit: a figure the current results do not hold
+    assert changed not in figures(current_results(benchmarks))
+    assert unsourced(readme.replace(quoted, changed), benchmarks) == {changed}
     assert unsourced(readme + "\nIt takes 19 s.\n", benchmarks) == {"19 s"}
     assert figures("```bash\nsleep 5 s\n```\nabout 2.4x") == {"2.4x"}
