@@ -53,6 +53,26 @@ HELDOUT = [("h_cave_2a", "cave_2", 1, 4, "final"), ("h_cave_2b", "cave_2", 10, 1
 GATE = {"gate": "photometric", "gate_level": "bone+pixel", "gate_search": 3}
 
 
+def windows(heldout_root: Path = HELDOUT_ROOT) -> dict[str, tuple]:
+    """Window name -> (Sintel root, scene, first, last, pass) of SINTEL and HELDOUT."""
+    out = {w: (SHARED / "data/sintel_samples", w.rstrip("b"), a, b, "final") for w, a, b in SINTEL}
+    return out | {w: (Path(heldout_root), *rest) for w, *rest in HELDOUT}
+
+
+def window_with_boxes(window: str, size, detector: str, heldout_root: Path = HELDOUT_ROOT):
+    """A Sintel window at ``size`` (H, W or None: full) and the person's boxes (T, 5) from the
+    YOLOX ``detector`` on its full-size frames (lit_boot.estimate.person_boxes), rescaled."""
+    from lit_boot.estimate import person_boxes
+
+    root, name, first, last, pass_name = windows(heldout_root)[window]
+    full = read_sintel(root, name, first=first, last=last, pass_name=pass_name)
+    scene = read_sintel(root, name, first=first, last=last, pass_name=pass_name, size=size)
+    boxes = person_boxes(full.frames, detector)
+    sx, sy = scene.width / full.width, scene.height / full.height
+    boxes[:, :4] = (boxes[:, :4] + 0.5) * torch.tensor([sx, sy, sx, sy]) - 0.5
+    return scene, boxes
+
+
 def gt_pair_epe(flows: torch.Tensor, scene) -> dict[str, float]:
     """EPE over the pairs with GT: all valid pixels, and valid non-occluded ones."""
     gt = scene.gt

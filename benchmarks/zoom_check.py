@@ -31,20 +31,11 @@ import torch
 
 from lit_boot.bootstrap.config import ZoomConfig
 from lit_boot.bootstrap.zoom import keep_pixels
-from lit_boot.data.readers import read_sintel
-from lit_boot.estimate import person_boxes
 from lit_boot.flow import load_raft, predict_flow
 from lit_boot.flow.zoom import pair_boxes, refines, zoom_pair
-from real_data import HELDOUT, HELDOUT_ROOT, SHARED, SINTEL
+from real_data import HELDOUT, HELDOUT_ROOT, SHARED, SINTEL, window_with_boxes
 
 SCALES = (2.0, 1.5)
-
-
-def windows(heldout_root: Path) -> dict[str, tuple]:
-    """window -> (root, scene, first, last, pass)."""
-    out = {w: (SHARED / "data/sintel_samples", w.rstrip("b"), a, b, "final") for w, a, b in SINTEL}
-    out |= {w: (heldout_root, *rest) for w, *rest in HELDOUT}
-    return out
 
 
 def rules(pair: dict) -> dict[str, tuple[torch.Tensor, float] | None]:
@@ -81,14 +72,9 @@ def main() -> None:
     size = None if args.size == "full" else tuple(int(v) for v in args.size.split(","))
     model = load_raft("raft_small", args.weights).eval()
     config = ZoomConfig()
-    table, known = {}, windows(Path(args.heldout_root))
+    table = {}
     for window in args.windows.split(","):
-        root, scene_name, first, last, pass_name = known[window]
-        full = read_sintel(root, scene_name, first=first, last=last, pass_name=pass_name)
-        scene = read_sintel(root, scene_name, first=first, last=last, pass_name=pass_name, size=size)
-        boxes = person_boxes(full.frames, args.detector)
-        sx, sy = scene.width / full.width, scene.height / full.height
-        boxes[:, :4] = (boxes[:, :4] + 0.5) * torch.tensor([sx, sy, sx, sy]) - 0.5
+        scene, boxes = window_with_boxes(window, size, args.detector, Path(args.heldout_root))
         sums = {}
         for t, box in enumerate(pair_boxes(boxes)):
             if not scene.gt.flow_valid[t].any():

@@ -32,12 +32,10 @@ from lit_boot.bootstrap.config import ZoomConfig
 from lit_boot.bootstrap.zoom import person_boxes as pose_boxes
 from lit_boot.bootstrap.zoom import zoom_flows
 from lit_boot.core import Scene
-from lit_boot.data.readers import read_sintel
-from lit_boot.estimate import person_boxes
 from lit_boot.flow import load_raft, predict_flow
 from lit_boot.synth import EstimateConfig, make_scene
 from lit_boot.synth.config import ACCURATE_DETECTOR
-from real_data import HELDOUT, HELDOUT_ROOT, SHARED, SINTEL
+from real_data import HELDOUT_ROOT, SHARED, SINTEL, window_with_boxes
 
 
 def raft_flows(model, scene: Scene, pairs: list[int]) -> torch.Tensor:
@@ -51,16 +49,9 @@ def epe(flows: torch.Tensor, gt: torch.Tensor, mask: torch.Tensor) -> float:
 
 def sintel_cases(args, model):
     """(name, scene, pairs, boxes (T, 5), masks {"all": (P, H, W)}) per window."""
-    known = {w: (SHARED / "data/sintel_samples", w.rstrip("b"), a, b, "final") for w, a, b in SINTEL}
-    known |= {w: (Path(args.heldout_root), *rest) for w, *rest in HELDOUT}
     size = None if args.size == "full" else tuple(int(v) for v in args.size.split(","))
     for window in args.windows.split(","):
-        root, name, first, last, pass_name = known[window]
-        full = read_sintel(root, name, first=first, last=last, pass_name=pass_name)
-        scene = read_sintel(root, name, first=first, last=last, pass_name=pass_name, size=size)
-        boxes = person_boxes(full.frames, args.detector)
-        sx, sy = scene.width / full.width, scene.height / full.height
-        boxes[:, :4] = (boxes[:, :4] + 0.5) * torch.tensor([sx, sy, sx, sy]) - 0.5
+        scene, boxes = window_with_boxes(window, size, args.detector, Path(args.heldout_root))
         pairs = [t for t in range(scene.num_frames - 1) if scene.gt.flow_valid[t].any()]
         yield window, scene, pairs, boxes, {"all": scene.gt.flow_valid[pairs]}
 
