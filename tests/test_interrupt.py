@@ -29,7 +29,7 @@ RANDOM_RAFT = {"weights": None, "train_updates": 2, "predict_updates": 3}
 #: Runs lit-boot's main with SIGINT sent from inside stage $SIGINT_AT (none: uninterrupted).
 DRIVER = textwrap.dedent("""
     import os, signal, sys
-    from lit_boot.bootstrap import runner
+    from lit_boot.bootstrap import runner, zoom
     from lit_boot.cli import main
     from lit_boot.flow import FlowTTT
     from lit_boot.pose.base import RefinerBase
@@ -56,7 +56,7 @@ DRIVER = textwrap.dedent("""
     runner.stage_header = tracking
     ctrl_c_in(FlowTTT, "training_step", 2)
     ctrl_c_in(RefinerBase, "training_step", 3)
-    ctrl_c_in(runner, "zoom_flows", 1)
+    ctrl_c_in(zoom, "zoom_flows", 1)
     sys.exit(main(sys.argv[1:]))
 """)
 
