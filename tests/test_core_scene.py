@@ -207,9 +207,16 @@ def test_summary_mentions_frames_size_and_flow():
     assert f"{W}x{H} px" in text
     assert "12.5 fps" in text
     assert "lsp14 (14 joints), cameras: weak_perspective" in text
-    assert "coco17, mean confidence 0.50" in text
+    assert f"coco17, mean confidence 0.50 (a person in {T} of {T} frames)" in text
     mean = (5.0 * (flow[0, 0].numel() * (T - 1) - 1) + 10.0) / (flow[0, 0].numel() * (T - 1))
     assert f"GT flow magnitude: mean {mean:.2f} px, max 10.00 px" in text
+
+
+def test_summary_counts_the_frames_with_a_pose_and_with_a_person_box():
+    conf, boxes = torch.zeros(T, 17), torch.zeros(T, 5)
+    conf[1, 3], boxes[1:, :] = 0.7, torch.tensor([1.0, 1.0, 5.0, 4.0, 0.9])
+    text = Scene(**scene_fields(keypoints_conf=conf, person_boxes=boxes)).summary()
+    assert f"(a person in 1 of {T} frames)" in text and f"person boxes: in {T - 1} of {T} frames" in text
 
 
 def test_summary_of_bare_scene():
@@ -226,4 +233,8 @@ def test_a_pose_estimator_that_found_nobody_is_named_as_such():
     Scene(**scene_fields(**nobody)).require_pose("3d")  # 3D joints given: they are the pose
     with pytest.raises(ValueError, match="3D mode needs 3D joints"):  # keypoints found, no 3D: as before
         Scene(**scene_fields(joints3d=None, cameras=None)).require_pose("3d")
+    boxes = torch.tensor([[1.0, 1.0, 5.0, 4.0, 0.9]]).repeat(T, 1)  # the detector found the person, no pose
+    with pytest.raises(ValueError, match="no pose in any frame .*detector's boxes; in mode '2d' the zoom"):
+        Scene(**scene_fields(joints3d=None, cameras=None, person_boxes=boxes, **nobody)).require_pose("3d")
+    Scene(**scene_fields(joints3d=None, cameras=None, person_boxes=boxes, **nobody)).require_pose("2d")
     Scene(**scene_fields()).require_pose("2d")

@@ -42,6 +42,7 @@ td.better { color: #1a6b2a; font-weight: 600; } td.worse { color: #b3261e; font-
 .row { display: flex; flex-wrap: wrap; gap: 10px; margin: 4px 0 10px; }
 figure { margin: 0; } figcaption { font-size: 13px; color: #333; max-width: 340px; }
 figure img { display: block; image-rendering: pixelated; border: 1px solid #ccc; }
+img.plot { max-width: 100%; height: auto; }
 .bar { display: flex; align-items: center; gap: 6px; font-size: 12px; color: #444; margin-top: 2px; }
 .bar span.g { display: inline-block; width: 140px; height: 10px; border: 1px solid #999; }
 .sw { display: inline-block; width: 12px; height: 12px; border: 1px solid #777; vertical-align: middle;

@@ -209,7 +209,10 @@ class Scene:
             raise ValueError(f"scene {self.name!r}: no person in any frame (every keypoint has confidence 0: the "
                              "pose estimator found nobody), so there is nothing to bootstrap")  # fmt: skip
         if mode == "3d" and (self.joints3d is None or self.cameras is None):
-            raise ValueError(f"scene {self.name!r}: 3D mode needs 3D joints with cameras (use mode '2d')")
+            no_pose = self.keypoints_conf is not None and not bool((self.keypoints_conf > 0).any())
+            why = (" and the pose estimator found no pose in any frame (only the person detector's boxes; in "
+                   "mode '2d' the zoom stage still works on them)" if no_pose else " (use mode '2d')")
+            raise ValueError(f"scene {self.name!r}: 3D mode needs 3D joints with cameras{why}")
         if mode == "2d" and self.keypoints2d is None:
             raise ValueError(f"scene {self.name!r}: 2D mode needs 2D keypoints")
 
@@ -240,7 +243,11 @@ class Scene:
             lines.append(f"  3D joints: {self.joints3d_layout} ({self.joints3d.shape[1]} joints){cam}")
         if self.keypoints2d is not None:
             mean_conf = self.keypoints_conf.float().mean().item()
-            lines.append(f"  2D keypoints: {self.keypoints_layout}, mean confidence {mean_conf:.2f}")
+            found = int((self.keypoints_conf > 0).flatten(1).any(1).sum())
+            lines.append(f"  2D keypoints: {self.keypoints_layout}, mean confidence {mean_conf:.2f}"
+                         f" (a person in {found} of {T} frames)")
+        if self.person_boxes is not None:
+            lines.append(f"  person boxes: in {int((self.person_boxes[:, 4] > 0).sum())} of {T} frames")
         if self.gt is not None:
             have = [k for k in ("flow", "flow_occluded", "joints3d", "joints2d", "keypoints2d", "person_mask", "cameras")
                     if getattr(self.gt, k) is not None]  # fmt: skip
