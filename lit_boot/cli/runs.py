@@ -125,7 +125,7 @@ def demo_parser() -> ArgumentParser:
 
 def demo_minutes(frames: int, height: int, width: int, epochs: int) -> float:
     """About how long the demo takes from scratch on 2 free CPU cores, minutes. Measured
-    (BENCHMARKS.md, "Current results": 27 s, --quick 22 s): ~20 s of start-up, RAFT and pose
+    (BENCHMARKS.md, "Current results": 25 s, --quick 20 s): ~20 s of start-up, RAFT, zoom and pose
     stage, plus ~0.06 s per training step (one pair, 2 warm RAFT updates on a crop) at 256x128,
     growing about as the square root of the pixels; far longer on busy cores."""
     steps = 2 * (frames - 1) * epochs  # both flow stages train on every pair
