@@ -89,7 +89,8 @@ def mediapipe_available() -> bool:
     return True
 
 
-def _pose_solution(mp: Any, model_complexity: int, min_detection_confidence: float, min_tracking_confidence: float):
+def _pose_solution(mp: Any, model_complexity: int, min_detection_confidence: float, min_tracking_confidence: float,
+                   static_image_mode: bool = False):  # fmt: skip
     if model_complexity not in _MODEL_FILES:
         raise ValueError(f"model_complexity: expected 0, 1 or 2, got {model_complexity!r}")
     for name, value in (("min_detection_confidence", min_detection_confidence),
@@ -98,7 +99,7 @@ def _pose_solution(mp: Any, model_complexity: int, min_detection_confidence: flo
             raise ValueError(f"{name}: expected a value in [0, 1], got {value!r}")
     model = Path(mp.__file__).parent / "modules" / "pose_landmark" / _MODEL_FILES[model_complexity]
     try:
-        return mp.solutions.pose.Pose(static_image_mode=False, model_complexity=model_complexity,
+        return mp.solutions.pose.Pose(static_image_mode=static_image_mode, model_complexity=model_complexity,
                                       min_detection_confidence=min_detection_confidence,
                                       min_tracking_confidence=min_tracking_confidence)  # fmt: skip
     except OSError as err:  # 0 and 2 are downloaded on first use; only 1 ships with mediapipe
@@ -230,6 +231,7 @@ def estimate_poses(
     max_frames: int | None = None,
     resize: Any = None,
     detector: Any = None,
+    crops: bool = False,
 ) -> PoseEstimates:
     """MediaPipe Pose on every frame of ``video``: frames (T, 3, H, W) uint8 RGB, a Scene, or a
     video file / folder of frames (read with ``read_video(path, stride, max_frames, resize)``;
@@ -237,7 +239,10 @@ def estimate_poses(
     the frames MediaPipe saw (``image_size``). With a ``detector`` (a YOLOX model path or name,
     e.g. ``"yolox_nano"``, or a :class:`~.detector.PersonDetector`) the main person's box in
     every frame is found too (``person_boxes``; :func:`~.person_track.person_boxes`): the
-    region the method spends resolution on, also where MediaPipe misses the person. Returns
+    region the method spends resolution on, also where MediaPipe misses the person. There, with
+    ``crops``, MediaPipe runs again on crops around the box, enlarged and upsampled
+    (:mod:`.crop_pose`; ``metadata["crop_found"]`` counts the frames it found; off by default:
+    on the Sintel samples most of the poses it adds lie on non-human figures). Returns
     PoseEstimates with source ``mediapipe-<version>``; see the module docstring for conventions."""
     mp = import_mediapipe()
     frame_indices = None
@@ -255,20 +260,38 @@ def estimate_poses(
     meta = {"model_complexity": model_complexity, "min_detection_confidence": min_detection_confidence,
             "min_tracking_confidence": min_tracking_confidence, "mediapipe_version": mp.__version__,
             "seconds_per_frame": float(raw["seconds"].mean())}  # fmt: skip
+    boxes = None
+    if detector is not None:
+        from .detector import PersonDetector
+        from .person_track import person_boxes
+
+        detector = detector if isinstance(detector, PersonDetector) else PersonDetector(detector)
+        boxes = person_boxes(video, detector)
+        meta.update({"detector": str(detector.path), "detector_found": int((boxes[:, 4] > 0).sum())})
+        if crops:
+            raw = _with_crops(mp, raw, video, boxes, model_complexity, min_detection_confidence, meta)
     est = poses_from_landmarks(
         raw["landmarks"], landmark_confidence(raw["visibility"], raw["presence"]), raw["world"], raw["found"],
         tuple(video.shape[2:]), frame_indices, max_jump=max_jump, on_jump=on_jump,
         source=f"mediapipe-{mp.__version__}", metadata=meta,
     )  # fmt: skip
-    if detector is None:
-        return est
-    from .detector import PersonDetector
-    from .person_track import person_boxes
+    return est if boxes is None else replace(est, person_boxes=boxes)
 
-    detector = detector if isinstance(detector, PersonDetector) else PersonDetector(detector)
-    boxes = person_boxes(video, detector)
-    meta = {**est.metadata, "detector": str(detector.path), "detector_found": int((boxes[:, 4] > 0).sum())}
-    return replace(est, person_boxes=boxes, metadata=meta)
+
+def _with_crops(mp: Any, raw: dict[str, torch.Tensor], frames: torch.Tensor, boxes: torch.Tensor,
+                model_complexity: int, min_detection_confidence: float, meta: dict[str, Any]) -> dict[str, torch.Tensor]:  # fmt: skip
+    """``raw`` (run_mediapipe's arrays) with the frames it missed filled from MediaPipe on the
+    detector's crops (:func:`~.crop_pose.crop_landmarks`); ``meta`` records how many."""
+    from .crop_pose import CROP_ATTEMPTS, crop_landmarks
+
+    with _pose_solution(mp, model_complexity, min_detection_confidence, 0.5, static_image_mode=True) as pose:
+        cropped = crop_landmarks(pose, frames, boxes, ~raw["found"])
+    fill = cropped["found"]
+    merged = {k: torch.where(fill.view(-1, *[1] * (v.ndim - 1)), cropped[k], v) for k, v in raw.items() if k != "seconds"}
+    merged["seconds"] = raw["seconds"] + cropped["seconds"]
+    meta.update({"crop_found": int(fill.sum()), "crop_frames": torch.nonzero(fill).flatten().tolist(),
+                 "crop_attempts": [list(a) for a in CROP_ATTEMPTS]})  # fmt: skip
+    return merged
 
 
 def _scene_frame_indices(scene: Scene) -> torch.Tensor | None:
