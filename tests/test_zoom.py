@@ -145,6 +145,10 @@ def test_the_stage_keeps_a_confirmed_refinement_and_refuses_a_large_change():
     wrong = truth.clone()
     wrong[0, 20:70, 30:90] = 0.0  # a small change (2 px) to a worse flow: the frames refuse it
     assert keep_pixels(frames, near, wrong, region, config)[25:65, 40:80].float().mean() < 0.05
+    alone = ZoomConfig(confirm="none")  # the refinement limit alone: the small worse change is kept too
+    assert keep_pixels(frames, near, wrong, region, alone)[20:70, 30:90].all()
+    assert not keep_pixels(frames, near, wrong, region, alone)[:20].any()
+    assert not keep_pixels(frames, base, far, region, alone).any()  # ... and the large change refused
 
 
 def test_zoom_flows_records_every_pair(monkeypatch):
@@ -185,6 +189,8 @@ def test_config_turns_the_zoom_stage_on_in_the_default_preset_only():
         BootstrapConfig(zoom={"scale": 2})
     with pytest.raises(ValueError, match="zoom.teach"):
         ZoomConfig(teach="sketch")
+    with pytest.raises(ValueError, match="zoom.confirm: expected one of"):
+        ZoomConfig(confirm="flow")
 
 
 def test_a_run_records_the_zoom_stage_and_resumes_past_it(tmp_path, monkeypatch):

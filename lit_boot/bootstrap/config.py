@@ -35,6 +35,8 @@ ZOOMS = ("off", "person")
 #: What the flow stages learn from the zoom: nothing (off), its flow as the base the stick-man is
 #: painted over (base), or that and its confirmed pixels painted instead of the stick-man (confirmed).
 ZOOM_TEACHING = ("off", "base", "confirmed")
+#: What must confirm the zoomed flow, beside the refinement limit: the frames (census) or nothing.
+ZOOM_CONFIRM = ("census", "none")
 
 #: The default preset's fast fine-tune (issue 15): see lit_boot.flow.warm.
 FAST_FLOW: dict[str, Any] = {"train_parts": "update_block", "warm_start": True, "train_updates": 2, "crop_margin": 24,
@@ -156,6 +158,9 @@ class ZoomConfig:
         max_updates: the most RAFT iterations on the zoomed crop.
         max_change_px: the zoomed flow is kept only where it moves RAFT's flow by less than
             this, px (16: two cells of RAFT's grid): a refinement, not another match.
+        confirm: census (the frames must say the zoomed flow is better: ``window`` and
+            ``margin``) or none (the refinement limit alone; BENCHMARKS.md, "What the zoom stage
+            keeps").
         window: the box (px) over which each pixel's census errors are averaged.
         margin: how much lower (a fraction of RAFT's) the zoomed flow's averaged error must be;
             the pixel's own error must be lower too.
@@ -174,11 +179,14 @@ class ZoomConfig:
     updates: int = 8
     max_updates: int = 16
     max_change_px: float = 16.0
+    confirm: str = "census"
     window: int = 5
     margin: float = 0.02
     teach: str = "off"
 
     def __post_init__(self) -> None:
+        if self.confirm not in ZOOM_CONFIRM:
+            raise ValueError(f"zoom.confirm: expected one of {ZOOM_CONFIRM}, got {self.confirm!r}")
         if self.teach not in ZOOM_TEACHING:
             raise ValueError(f"zoom.teach: expected one of {ZOOM_TEACHING}, got {self.teach!r}")
         if self.method not in (None, *ZOOMS):

@@ -8,7 +8,8 @@ motion). The zoomed flow replaces RAFT's pixel by pixel where both hold:
   match, which the frames cannot be trusted to judge: fog, blur and fast motion fool them);
 - the frames say it is better: its census error averaged over a ``window`` box is below
   ``(1 - margin)`` x RAFT's, and the pixel's own error is lower too (the self-check's person rule,
-  :func:`~lit_boot.bootstrap.selfcheck.choose_pixels`).
+  :func:`~lit_boot.bootstrap.selfcheck.choose_pixels`); with ``confirm="none"`` this test is
+  left out.
 
 The result is the flow the flow stages start from and are checked against. The person's box per
 frame: the scene's ``person_boxes`` when it has them (a person detector), else the box around
@@ -65,15 +66,18 @@ def keep_pixels(frames: Tensor, base: Tensor, candidate: Tensor, region: tuple[i
     reach = CENSUS_RADIUS + config.window // 2 + 1  # the window's context around the region
     box = (max(0, y0 - reach), min(height, y1 + reach), max(0, x0 - reach), min(width, x1 + reach))
     by0, by1, bx0, bx1 = box
-    pair = frames[:1], frames[1:]
-    err_b, valid_b = photometric_error(*pair, base[None].float(), radius=CENSUS_RADIUS, box=box)
-    err_z, valid_z = photometric_error(*pair, candidate[None].float(), radius=CENSUS_RADIUS, box=box)
     select = torch.zeros(by1 - by0, bx1 - bx0, dtype=torch.bool)
     select[y0 - by0 : y1 - by0, x0 - bx0 : x1 - bx0] = True
     select &= refines(base[:, by0:by1, bx0:bx1], candidate[:, by0:by1, bx0:bx1], config.max_change_px)
+    keep = torch.zeros(height, width, dtype=torch.bool)
+    if config.confirm == "none":  # the refinement limit alone
+        keep[by0:by1, bx0:bx1] = select
+        return keep
+    pair = frames[:1], frames[1:]
+    err_b, valid_b = photometric_error(*pair, base[None].float(), radius=CENSUS_RADIUS, box=box)
+    err_z, valid_z = photometric_error(*pair, candidate[None].float(), radius=CENSUS_RADIUS, box=box)
     won = choose_pixels(err_b[0], err_z[0], (valid_b & valid_z)[0], select, window=config.window,
                         margin=config.margin, own=True)  # fmt: skip
-    keep = torch.zeros(height, width, dtype=torch.bool)
     keep[by0:by1, bx0:bx1] = won
     return keep
 
