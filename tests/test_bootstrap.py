@@ -210,6 +210,19 @@ def test_drift_guard_rolls_back_a_stage_that_worsens_the_image_evidence(tiny_sce
     assert "stage 1/3 flow_1" in caplog.text and "stage 1/3" not in capsys.readouterr().out
 
 
+def test_drift_guard_records_a_stage_that_undoes_the_previous_ones_gain(tiny_scene, tmp_path, monkeypatch, caplog):
+    caplog.set_level(logging.INFO, logger="lit_boot")
+    photo = iter([1.0, 0.8, 0.9])  # initial, flow_1 (better), flow_2 (undoes half of flow_1's gain)
+    monkeypatch.setattr(runner_module, "photo_error", lambda *a, **k: next(photo))
+    monkeypatch.setattr(runner_module, "pose_track_error", lambda *a, **k: 1.0)
+    result = bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, zoom={"method": "off"}, **FAST)
+    assert [r["stage"] for r in result.history] == ["initial", "flow_1", "pose_1", "flow_2"]  # the run went on
+    summary = json.loads((tmp_path / "run/summary.json").read_text())
+    assert summary["drift_guard_events"] == [{"stage": "flow_2", "guard": "drift", "evidence": "photo_error",
+                                              "before": 0.8, "after": 0.9, "action": "record"}]  # fmt: skip
+    assert "census error rose 0.800 -> 0.900 (recorded" in caplog.text
+
+
 def test_drift_guard_tolerance_and_record(tmp_path):
     from lit_boot.bootstrap.guard import drift_guard
 
@@ -220,7 +233,8 @@ def test_drift_guard_tolerance_and_record(tmp_path):
     assert drift_guard(BootstrapConfig(drift_guard="stop", drift_tolerance=0.05), flow, history) is None
     event = drift_guard(BootstrapConfig(drift_guard="stop", drift_tolerance=0.03), flow, history)
     assert event == {"guard": "drift", "evidence": "photo_error", "before": 10.0, "after": 10.4, "action": "stop"}
-    assert drift_guard(BootstrapConfig(drift_guard="record"), flow, history) is None
+    recorded = drift_guard(BootstrapConfig(drift_guard="record"), flow, history)  # the default: kept, not acted on
+    assert recorded == {**event, "action": "record"}
     with pytest.raises(ValueError, match="drift_tolerance"):
         BootstrapConfig(drift_tolerance=-0.1)
 

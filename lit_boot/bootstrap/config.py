@@ -266,8 +266,9 @@ class BootstrapConfig:
         drift_guard: after each stage its image evidence (no ground truth; see
             :mod:`lit_boot.bootstrap.guard`) is compared with the last stage's: a flow stage's
             census error of the frames warped by its flow, a pose stage's census error along
-            the joint tracks. record (only record them), stop (stop the run when the stage made
-            it worse by more than drift_tolerance) or rollback (undo that stage and stop).
+            the joint tracks. When a stage made it worse by more than drift_tolerance: record
+            (the event goes into summary.json, the log and report.html; the run goes on), stop
+            (stop the run there) or rollback (undo that stage and stop).
         drift_tolerance: how much worse, as a fraction (0.01: 1%), a stage's evidence may get
             before the drift guard acts.
         flow_format: flo (one Middlebury file per pair) or npz for the run's final flows.

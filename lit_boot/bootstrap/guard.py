@@ -17,13 +17,15 @@ __all__ = ["drift_guard", "guard_text"]
 
 
 def drift_guard(config: BootstrapConfig, record: dict[str, Any], history: list[dict[str, Any]]) -> dict[str, Any] | None:
-    """The guard's event for a finished stage's ``record`` (None when the evidence did not get
-    worse by more than ``config.drift_tolerance``, a fraction, or when the guard only records):
-    ``{"guard": "drift", "evidence": key, "before": x, "after": y, "action": stop | rollback}``."""
+    """The guard's event for a finished stage's ``record``, None when the evidence did not get
+    worse by more than ``config.drift_tolerance``, a fraction:
+    ``{"guard": "drift", "evidence": key, "before": x, "after": y, "action": record | stop | rollback}``
+    (``config.drift_guard``: with record the run goes on, the event is kept in summary.json and
+    the report)."""
     key = "photo_error" if record["kind"] in ("flow", "zoom") else "track_error"
     before = next((r[key] for r in reversed(history) if key in r and not r.get("rolled_back")), float("nan"))
     after = record[key]
-    if config.drift_guard == "record" or not after > before * (1.0 + config.drift_tolerance):
+    if not after > before * (1.0 + config.drift_tolerance):
         return None
     return {"guard": "drift", "evidence": key, "before": before, "after": after, "action": config.drift_guard}
 

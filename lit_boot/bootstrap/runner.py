@@ -310,7 +310,7 @@ class Bootstrap:
             st.scene = st.result.apply_to(st.scene)
         st.seconds[name] = record["info"]["seconds"]
         log_stage_images(st.loggers, index, name, st.scene, st.flows, self.config.mode, st.decisions)
-        return "guard" not in record  # the drift guard stopped the run here
+        return record.get("guard", {}).get("action") != "stop"  # the drift guard stopped the run here
 
     def _run_stage(self, st: _RunState, index: int, name: str) -> bool:
         """Run a stage; save its results, stage.json last; False if the run stops here."""
@@ -355,9 +355,11 @@ class Bootstrap:
         st.history.append(record)
         st.seconds[name] = record["info"]["seconds"]
         log_stage_images(st.loggers, index, name, st.scene, st.flows, cfg.mode, st.decisions)
-        if guard is not None:
+        if guard is not None and guard["action"] == "stop":
             log.warning(f"  drift guard: {guard_text(guard)}; run stopped")
             return False
+        if guard is not None:
+            log.info(f"  drift guard: {guard_text(guard)} (recorded; drift_guard stop or rollback ends the run here)")
         return True
 
     def _roll_back(self, st: _RunState, head: dict[str, Any], start: float, err: NonFiniteError) -> bool:
