@@ -156,6 +156,20 @@ def test_a_zoom_kept_after_a_rolled_back_flow_stage_is_the_final_flow(run: Path,
     assert finished.decisions["kept"].max() == 0 and finished.decisions["zoom"].max() == 1
 
 
+def test_the_drift_guards_events_are_in_words(run: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    summary = json.loads((copy / "summary.json").read_text())
+    summary["stages"] = [{k: v for k, v in r.items() if k != "guard"} for r in summary["stages"]]
+    (copy / "summary.json").write_text(json.dumps(summary))
+    assert "no stage made its image evidence worse." in write_report(copy).read_text()
+    event = {"guard": "drift", "evidence": "photo_error", "before": 0.8, "after": 0.9, "action": "record"}
+    summary["stages"][-1]["guard"] = event
+    (copy / "summary.json").write_text(json.dumps(summary))
+    html = unescape(write_report(copy).read_text())
+    assert "flow_2: the flow's census error rose 0.800 -> 0.900 (recorded, the run went on)." in html
+
+
 def test_a_scene_of_another_size_is_refused(run: Path) -> None:
     other = lit_boot.make_scene(motion="run", frames=5, height=32, width=96, seed=0)
     with pytest.raises(ValueError, match="32"):

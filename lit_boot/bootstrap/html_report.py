@@ -26,6 +26,7 @@ from ..data.atomic import atomic_write_bytes
 from ..data.visualize import flow_image
 from .decisions import decision_key, decision_summary
 from .finished import FinishedRun, read_run
+from .guard import guard_text
 from .html_parts import colour_bar, esc, img, page, swatches, table
 from .pair_maps import DIVERGING, SEQUENTIAL, Scales, pair_maps, pair_panels, pair_stats, pick_pairs, shared_scales
 from .report import metric_rows
@@ -129,6 +130,16 @@ def _zoom_table(record: dict[str, Any], pairs: int) -> str:
             "at the end.</p>")  # fmt: skip
 
 
+def _guard_part(run: FinishedRun) -> str:
+    """The guards' events (a stage that made its image evidence worse, a non-finite value), in words."""
+    actions = {"record": "recorded, the run went on", "stop": "the run stopped", "rollback": "rolled back, the run stopped"}
+    events = [(r["stage"], r["guard"]) for r in run.history if "guard" in r]
+    lines = [f"{stage}: {guard_text(g) if g.get('guard') == 'drift' else 'a non-finite value'} "
+             f"({actions.get(g.get('action'), g.get('action'))})" for stage, g in events]  # fmt: skip
+    text = "; ".join(lines) if lines else "no stage made its image evidence worse"
+    return f"<h3>The drift guard</h3><p class=\"note\">{esc(text)}.</p>"
+
+
 def _decisions_section(run: FinishedRun) -> str:
     zoom = _zoom_record(run)
     entries = [e for e in decision_summary(run.history) if zoom is None or e["stage"] != zoom["stage"]]
@@ -146,7 +157,7 @@ def _decisions_section(run: FinishedRun) -> str:
             "pixels keeping the tuned flow", "of the person", "rolled back"]  # fmt: skip
     zoom_part = _zoom_table(zoom, run.flows.shape[0]) if zoom is not None else ""
     flow_part = f"<h3>The flow stages</h3>{table(head, rows)}" if rows else ""
-    return f"<h2 id=\"decisions\">What each stage decided</h2>{zoom_part}{flow_part}"
+    return f"<h2 id=\"decisions\">What each stage decided</h2>{zoom_part}{flow_part}{_guard_part(run)}"
 
 
 def _wheel(scale: float, size: int = 56) -> np.ndarray:
