@@ -47,7 +47,11 @@ def test_pose_file_errors(tmp_path):
     header = {"format": "lit-boot-pose-estimates", "version": 1}
     cases = {
         "other.json": ({"format": "something"}, "not a 'lit-boot-pose-estimates'"),
-        "future.json": (header | {"version": 2, "frame_indices": [0]}, "unsupported version 2"),
+        "future.json": (header | {"version": 3, "frame_indices": [0]}, "unsupported version 3"),
+        "noids.json": (header | {"version": 2, "frame_indices": [0]}, "missing key 'track_ids'"),
+        "axis.json": (header | {"version": 2, "frame_indices": [0], "track_ids": [0, 1],
+                                "keypoints2d": [[[[0, 0]] * 17]], "keypoints_conf": [[[1] * 17]]},
+                      "keypoints2d: expected 2 people"),  # fmt: skip
         "noidx.json": (header | {"joints3d": [[[0, 0, 0]] * 14]}, "missing key 'frame_indices'"),
         "shape.json": (header | {"frame_indices": [0], "keypoints2d": [[[0, 0]] * 5], "keypoints_conf": [[1] * 5]},
                        "keypoints2d: expected shape"),  # fmt: skip

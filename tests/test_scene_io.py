@@ -101,7 +101,7 @@ def test_folder_contents(tmp_path: Path) -> None:
     scene = full_scene()
     save_scene(scene, tmp_path / "s")
     meta = json.loads((tmp_path / "s" / "scene.json").read_text())
-    assert meta["format"] == "lit-boot-scene" and meta["version"] == 1
+    assert meta["format"] == "lit-boot-scene" and meta["version"] == 2 and meta["others"] == []
     assert (meta["num_frames"], meta["height"], meta["width"]) == (T, H, W)
     assert meta["cameras"] == {"model": "weak_perspective", "crop_size": 256.0}
     assert meta["gt"] == {"joints_layout": "lsp14", "cameras": {"model": "pinhole", "crop_size": 224.0}}
@@ -250,9 +250,18 @@ def test_wrong_format_name(saved: Path) -> None:
 
 
 def test_newer_version(saved: Path) -> None:
-    edit_meta(saved, version=2)
-    with pytest.raises(SceneFormatError, match=f"{saved}.*version 2 is newer"):
+    edit_meta(saved, version=3)
+    with pytest.raises(SceneFormatError, match=f"{saved}.*version 3 is newer"):
         load_scene(saved)
+
+
+def test_a_version_1_scene_reads_as_one_person(saved: Path) -> None:
+    data = json.loads((saved / "scene.json").read_text())
+    data.pop("track_id"), data.pop("others")  # version 1 had neither
+    data["version"] = 1
+    (saved / "scene.json").write_text(json.dumps(data))
+    scene = load_scene(saved)
+    assert scene.num_people == 1 and scene.track_id == 0
 
 
 def test_frame_count_mismatch(saved: Path) -> None:

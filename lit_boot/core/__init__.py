@@ -12,6 +12,7 @@ from .cameras import (
     project_weak_perspective,
 )
 from .joints import COCO17, H36M17, LAYOUTS, LSP14, MEDIAPIPE33, JointLayout, get_layout, map_joints, mapping_matrix
+from .people import Person
 from .scene import POSE_MODES, GroundTruth, Scene, SceneValidationError
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "map_joints",
     "mapping_matrix",
     "GroundTruth",
+    "Person",
     "POSE_MODES",
     "Scene",
     "SceneValidationError",

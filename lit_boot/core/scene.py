@@ -1,4 +1,4 @@
-"""The scene: one video of one person, its pose estimates and optional ground truth.
+"""The scene: one video of one or more people, their pose estimates and optional ground truth.
 
 Shapes: T frames of H x W pixels; J 3D joints in ``joints3d_layout``; K 2D keypoints in
 ``keypoints_layout``. Units: pixels (pixel centres at integer coordinates), millimetres in the
@@ -10,80 +10,22 @@ naming the field and what was expected.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import torch
 
 from .cameras import Cameras
+from .checks import SceneValidationError, check_cameras, check_estimates, check_tensor
 from .joints import get_layout
+from .people import Person, check_people
 
 __all__ = ["Scene", "GroundTruth", "SceneValidationError", "check_estimates", "POSE_MODES"]
 
 #: The method's two modes: "3d" works from 3D joints with cameras, "2d" from 2D keypoints alone.
 POSE_MODES = ("3d", "2d")
-
-
-class SceneValidationError(ValueError):
-    """A scene field has the wrong shape, dtype or values."""
-
-
-def _check(name: str, value: Any, shape: tuple, kind: str) -> None:
-    """Check a tensor's shape (None in ``shape`` = any size), dtype kind and finiteness."""
-    if not isinstance(value, torch.Tensor):
-        raise SceneValidationError(f"{name}: expected a torch.Tensor, got {type(value).__name__}")
-    want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
-    if value.ndim != len(shape) or any(s is not None and s != v for s, v in zip(shape, value.shape)):
-        raise SceneValidationError(f"{name}: expected shape {want}, got {tuple(value.shape)}")
-    if kind == "uint8" and value.dtype != torch.uint8:
-        raise SceneValidationError(f"{name}: expected dtype uint8, got {value.dtype}")
-    if kind == "bool" and value.dtype != torch.bool:
-        raise SceneValidationError(f"{name}: expected dtype bool, got {value.dtype}")
-    if kind == "float":
-        if not value.is_floating_point():
-            raise SceneValidationError(f"{name}: expected a floating-point dtype, got {value.dtype}")
-        if not torch.isfinite(value).all():
-            raise SceneValidationError(f"{name}: expected finite values, found NaN or inf")
-
-
-def _check_cameras(name: str, cameras: Any, T: int) -> None:
-    if not isinstance(cameras, Cameras):
-        raise SceneValidationError(f"{name}: expected a lit_boot Cameras, got {type(cameras).__name__}")
-    _check(f"{name}.params", cameras.params, (T, cameras.params.shape[1]), "float")
-    if cameras.crops is not None:
-        _check(f"{name}.crops", cameras.crops, (T, 3), "float")
-
-
-def check_estimates(owner: str, est: Any, T: int) -> None:
-    """Check the pose-estimate fields of ``est`` (a Scene or alike: joints3d, joints3d_layout,
-    cameras, keypoints2d, keypoints_conf, keypoints_layout) for T frames; errors name
-    ``owner.field``."""
-    for key in ("joints3d_layout", "keypoints_layout"):
-        try:
-            get_layout(getattr(est, key))
-        except ValueError as err:
-            raise SceneValidationError(f"{owner}.{key}: {err}") from None
-    if est.joints3d is not None:
-        J = get_layout(est.joints3d_layout).num_joints
-        _check(f"{owner}.joints3d", est.joints3d, (T, J, 3), "float")
-    if est.cameras is not None:
-        _check_cameras(f"{owner}.cameras", est.cameras, T)
-    if (est.keypoints2d is None) != (est.keypoints_conf is None):
-        raise SceneValidationError(f"{owner}.keypoints2d and {owner}.keypoints_conf: give both or neither")
-    if est.keypoints2d is not None:
-        K = get_layout(est.keypoints_layout).num_joints
-        _check(f"{owner}.keypoints2d", est.keypoints2d, (T, K, 2), "float")
-        _check(f"{owner}.keypoints_conf", est.keypoints_conf, (T, K), "float")
-        if (est.keypoints_conf < 0).any() or (est.keypoints_conf > 1).any():
-            raise SceneValidationError(f"{owner}.keypoints_conf: expected values in [0, 1]")
-    boxes = getattr(est, "person_boxes", None)
-    if boxes is not None:
-        _check(f"{owner}.person_boxes", boxes, (T, 5), "float")
-        if (boxes[:, 4] < 0).any() or (boxes[:, 4] > 1).any():
-            raise SceneValidationError(f"{owner}.person_boxes: expected scores (column 4) in [0, 1]")
-        found = boxes[:, 4] > 0
-        if ((boxes[found, 2:4] < boxes[found, 0:2])).any():
-            raise SceneValidationError(f"{owner}.person_boxes: expected x0 <= x1 and y0 <= y1 where a person is found")
 
 
 @dataclass
@@ -135,14 +77,14 @@ class GroundTruth:
         for key, (shape, kind) in checks.items():
             value = getattr(self, key)
             if value is not None:
-                _check(f"GroundTruth.{key}", value, shape, kind)
+                check_tensor(f"GroundTruth.{key}", value, shape, kind)
         if self.cameras is not None:
-            _check_cameras("GroundTruth.cameras", self.cameras, T)
+            check_cameras("GroundTruth.cameras", self.cameras, T)
 
 
 @dataclass
 class Scene:
-    """One video of one person with pose estimates and optional ground truth.
+    """One video with the pose estimates of its people and optional ground truth.
 
     frames (T, 3, H, W) uint8 RGB; fps frames per second.
     joints3d (T, J, 3) mm in the camera frame (root-relative when the camera model is
@@ -150,7 +92,9 @@ class Scene:
     keypoints2d (T, K, 2) px with keypoints_conf (T, K) in [0, 1] (0 = not detected).
     person_boxes (T, 5): the person's box per frame from a person detector, (x0, y0, x1, y1) px
     (pixel centres at integer coordinates, the box's outer edges) and a score in [0, 1] (0 =
-    nobody found).
+    nobody found). These fields are the main person's, whose track id is ``track_id``; the
+    other people of the video, if any, are in ``others`` (:class:`~lit_boot.core.people.Person`,
+    the same fields and layouts; ``people()``, ``person(p)``). A single-person scene has none.
     """
 
     frames: torch.Tensor
@@ -165,6 +109,8 @@ class Scene:
     gt: GroundTruth | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
     person_boxes: torch.Tensor | None = None
+    track_id: int = 0
+    others: tuple[Person, ...] = ()
 
     def __post_init__(self) -> None:
         self.validate()
@@ -183,17 +129,45 @@ class Scene:
 
     def validate(self) -> None:
         """Check all fields; raises :class:`SceneValidationError`."""
-        _check("Scene.frames", self.frames, (None, 3, None, None), "uint8")
+        check_tensor("Scene.frames", self.frames, (None, 3, None, None), "uint8")
         T, _, H, W = self.frames.shape
         if T < 1:
             raise SceneValidationError("Scene.frames: expected at least one frame, got T=0")
         if not (isinstance(self.fps, (int, float)) and self.fps > 0):
             raise SceneValidationError(f"Scene.fps: expected a positive number, got {self.fps!r}")
         check_estimates("Scene", self, T)
+        check_people("Scene", self, self.others, T)
         if self.gt is not None:
             if not isinstance(self.gt, GroundTruth):
                 raise SceneValidationError(f"Scene.gt: expected a GroundTruth, got {type(self.gt).__name__}")
             self.gt.validate(T, H, W, self.keypoints_layout)
+
+    # --- the people ----------------------------------------------------------------------------------
+    @property
+    def num_people(self) -> int:
+        """P: the main person and the others."""
+        return 1 + len(self.others)
+
+    def people(self) -> list[Person]:
+        """Every person, the main one first."""
+        return [Person.of(self), *self.others]
+
+    def person(self, p: int) -> Scene:
+        """A single-person scene of person ``p`` (0 = the main one, in :meth:`people` order):
+        the same frames and ground truth, that person's estimates in the main fields."""
+        if isinstance(p, bool) or not isinstance(p, int) or not 0 <= p < self.num_people:
+            raise IndexError(f"scene {self.name!r}: person {p!r} of {self.num_people} "
+                             f"(expected 0..{self.num_people - 1})")  # fmt: skip
+        if p == 0 and not self.others:
+            return self
+        return self.with_people([self.people()[p]])
+
+    def with_people(self, people: Sequence[Person]) -> Scene:
+        """A copy with ``people`` (at least one): the first is the main person, the rest the others."""
+        if not people:
+            raise ValueError(f"scene {self.name!r}: with_people needs at least one person")
+        main, *rest = people
+        return dataclasses.replace(self, **main.fields(), track_id=main.track_id, others=tuple(rest))
 
     # --- the pose in the method's two modes (the one place the 3D/2D switch is made) --------------
     def require_pose(self, mode: str) -> None:
@@ -248,6 +222,9 @@ class Scene:
                          f" (a person in {found} of {T} frames)")
         if self.person_boxes is not None:
             lines.append(f"  person boxes: in {int((self.person_boxes[:, 4] > 0).sum())} of {T} frames")
+        if self.others:
+            seen = ", ".join(f"{p.track_id}: {int(p.found().sum())}" for p in self.people())
+            lines.append(f"  people: {self.num_people} (track id: frames found, {seen})")
         if self.gt is not None:
             have = [k for k in ("flow", "flow_occluded", "joints3d", "joints2d", "keypoints2d", "person_mask", "cameras")
                     if getattr(self.gt, k) is not None]  # fmt: skip

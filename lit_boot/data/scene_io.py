@@ -1,6 +1,6 @@
 """A :class:`~lit_boot.core.scene.Scene` saved as a folder, losslessly.
 
-Folder layout (format ``lit-boot-scene``, version 1)::
+Folder layout (format ``lit-boot-scene``, version 2; version 1, without people, still reads)::
 
     <path>/frames/000000.png ...   RGB frames, lossless 8-bit PNG (one per frame)
     <path>/arrays.npz              uncompressed np.savez; one key per present tensor field
@@ -8,7 +8,9 @@ Folder layout (format ``lit-boot-scene``, version 1)::
 
 npz keys: joints3d, cameras_params, cameras_crops, keypoints2d, keypoints_conf, person_boxes, and the
 ground truth's gt_flow, gt_flow_valid, gt_flow_occluded, gt_joints3d, gt_joints2d, gt_keypoints2d,
-gt_cameras_params, gt_cameras_crops, gt_person_mask. Dtypes are kept exactly.
+gt_cameras_params, gt_cameras_crops, gt_person_mask; the other people's fields (``Scene.others``)
+as others_joints3d, others_keypoints2d, ... with a person axis first (P - 1, T, ...). Dtypes are
+kept exactly.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 import torch
 
 from ..core.cameras import Cameras
+from ..core.people import Person
 from ..core.scene import GroundTruth, Scene, SceneValidationError
 from .atomic import atomic_directory, atomic_write_bytes
 from .memory import check_memory, format_bytes
@@ -32,7 +35,8 @@ from .visualize import read_png, write_png
 __all__ = ["SCENE_FORMAT", "SCENE_FORMAT_VERSION", "SceneFormatError", "load_scene", "save_scene"]
 
 SCENE_FORMAT = "lit-boot-scene"
-SCENE_FORMAT_VERSION = 1
+SCENE_FORMAT_VERSION = 2
+_PERSON_TENSORS = ("joints3d", "keypoints2d", "keypoints_conf", "person_boxes")
 _GT_TENSORS = ("flow", "flow_valid", "flow_occluded", "joints3d", "joints2d", "person_mask", "keypoints2d")
 
 
@@ -63,6 +67,11 @@ def _arrays(scene: Scene) -> dict[str, torch.Tensor]:
     out = {"joints3d": scene.joints3d, "keypoints2d": scene.keypoints2d, "keypoints_conf": scene.keypoints_conf,
            "person_boxes": scene.person_boxes}
     out |= _camera_arrays("cameras", scene.cameras)
+    if scene.others:
+        others = [{key: getattr(p, key) for key in _PERSON_TENSORS} | _camera_arrays("cameras", p.cameras)
+                  for p in scene.others]  # fmt: skip
+        out |= {f"others_{key}": torch.stack([o[key] for o in others]) for key, value in others[0].items()
+                if value is not None}  # fmt: skip
     if scene.gt is not None:
         out |= {f"gt_{key}": getattr(scene.gt, key) for key in _GT_TENSORS}
         out |= _camera_arrays("gt_cameras", scene.gt.cameras)
@@ -116,6 +125,8 @@ def save_scene(scene: Scene, path: str | os.PathLike, *, overwrite: bool = False
         "joints3d_layout": scene.joints3d_layout,
         "keypoints_layout": scene.keypoints_layout,
         "cameras": _camera_json(scene.cameras),
+        "track_id": scene.track_id,
+        "others": [p.track_id for p in scene.others],
         "gt": None if gt is None else {"joints_layout": gt.joints_layout, "cameras": _camera_json(gt.cameras)},
         "fields": {key: str(value.dtype) for key, value in arrays.items()},
         "metadata": _checked_metadata(scene.metadata),
@@ -235,6 +246,22 @@ def _cameras(info: dict[str, Any] | None, arrays: dict[str, torch.Tensor], prefi
     return Cameras(info["model"], arrays[f"{prefix}_params"], arrays.get(f"{prefix}_crops"), info["crop_size"])
 
 
+def _others(meta: dict[str, Any], arrays: dict[str, torch.Tensor]) -> tuple[Person, ...]:
+    """The other people of a saved scene (none in version 1)."""
+    ids = meta.get("others", [])
+    if not isinstance(ids, list):
+        raise SceneFormatError(f"scene.json: others must be a list of track ids, got {ids!r}")
+    people = []
+    for i, track_id in enumerate(ids):
+        get = lambda key: arrays[f"others_{key}"][i] if f"others_{key}" in arrays else None  # noqa: E731
+        cameras = None
+        if meta["cameras"] is not None:
+            cameras = Cameras(meta["cameras"]["model"], get("cameras_params"), get("cameras_crops"),
+                              meta["cameras"]["crop_size"])  # fmt: skip
+        people.append(Person(track_id=track_id, cameras=cameras, **{key: get(key) for key in _PERSON_TENSORS}))
+    return tuple(people)
+
+
 def load_scene(path: str | os.PathLike) -> Scene:
     """Load a scene saved by :func:`save_scene`: identical tensors (bit-exact, same dtypes, on
     the CPU), layouts, cameras and metadata. Reads only; writes nothing into the folder.
@@ -262,9 +289,10 @@ def load_scene(path: str | os.PathLike) -> Scene:
             cameras=_cameras(meta["cameras"], arrays, "cameras"),
             keypoints2d=arrays.get("keypoints2d"), keypoints_conf=arrays.get("keypoints_conf"),
             keypoints_layout=meta["keypoints_layout"], gt=gt, metadata=meta["metadata"],
-            person_boxes=arrays.get("person_boxes"),
+            person_boxes=arrays.get("person_boxes"), track_id=meta.get("track_id", 0),
+            others=_others(meta, arrays),
         )  # fmt: skip
     except KeyError as err:
         raise SceneFormatError(f"{path / 'scene.json'}: corrupted, missing key {err}") from None
-    except (SceneValidationError, ValueError, TypeError, AttributeError) as err:
+    except (SceneValidationError, ValueError, TypeError, AttributeError, IndexError) as err:
         raise SceneFormatError(f"{path}: stored scene is inconsistent: {err}") from None

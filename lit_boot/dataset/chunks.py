@@ -167,6 +167,7 @@ def slice_scene(scene: Scene, start: int, stop: int) -> Scene:
         cameras=_cut_cameras(scene.cameras, start, stop), keypoints2d=_cut(scene.keypoints2d, start, stop),
         keypoints_conf=_cut(scene.keypoints_conf, start, stop), gt=_cut_gt(scene.gt, start, stop),
         metadata=_cut_metadata(scene.metadata, start, stop, T), person_boxes=_cut(scene.person_boxes, start, stop),
+        others=tuple(person.map(lambda x: x[start:stop].clone()) for person in scene.others),
     )  # fmt: skip
 
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import torch
 
-__all__ = ["main_person_boxes", "person_boxes"]
+__all__ = ["main_person_boxes", "person_boxes", "check_detections"]
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +72,16 @@ def _bridge(boxes: torch.Tensor, found: torch.Tensor, max_gap: int) -> int:
     return filled
 
 
+def check_detections(detections: Sequence[torch.Tensor]) -> list[torch.Tensor]:
+    """The per-frame detections (T tensors (N_t, 5)) as float32 CPU tensors; ValueError naming
+    the frame for one of another shape."""
+    for t, d in enumerate(detections):
+        if not isinstance(d, torch.Tensor) or d.ndim != 2 or d.shape[1] != 5:
+            got = tuple(d.shape) if isinstance(d, torch.Tensor) else type(d).__name__
+            raise ValueError(f"detections[{t}]: expected a tensor of shape (N, 5) (x0, y0, x1, y1, score), got {got}")
+    return [d.detach().float().cpu() for d in detections]
+
+
 def main_person_boxes(
     detections: Sequence[torch.Tensor], *, max_gap: int = 3, max_jump: float = 0.5
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -92,11 +102,7 @@ def main_person_boxes(
         raise ValueError(f"max_gap: expected a number of frames >= 0, got {max_gap!r}")
     if max_jump <= 0:
         raise ValueError(f"max_jump: expected a positive number of box sizes, got {max_jump!r}")
-    for t, d in enumerate(detections):
-        if not isinstance(d, torch.Tensor) or d.ndim != 2 or d.shape[1] != 5:
-            got = tuple(d.shape) if isinstance(d, torch.Tensor) else type(d).__name__
-            raise ValueError(f"detections[{t}]: expected a tensor of shape (N, 5) (x0, y0, x1, y1, score), got {got}")
-    detections = [d.detach().float().cpu() for d in detections]
+    detections = check_detections(detections)
     T = len(detections)
     boxes, found = torch.zeros(T, 4), torch.zeros(T, dtype=torch.bool)
     prominence = [(d[:, 2:4] - d[:, :2]).clamp_min(0).prod(1) * d[:, 4] for d in detections]

@@ -1,0 +1,108 @@
+"""The people tracker (lit_boot.estimate.people_track) on detections with known tracks."""
+
+import pytest
+import torch
+
+from lit_boot.estimate.people_track import parse_people, select_people, track_people
+
+
+def box(cx: float, cy: float, w: float = 20.0, h: float = 40.0, score: float = 0.9) -> list[float]:
+    return [cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2, score]
+
+
+def frames_of(*per_frame: list[list[float]]) -> list[torch.Tensor]:
+    return [torch.tensor(f, dtype=torch.float32).reshape(-1, 5) for f in per_frame]
+
+
+def crossing(T: int = 12, speed: float = 8.0, hide: int | None = None, shuffle: bool = True) -> tuple[list[torch.Tensor], torch.Tensor]:
+    """Person A walks right, B (a little smaller) walks left; they cross in the middle, each
+    box overlapping the other for several frames. ``hide``: a frame where B is not detected
+    (occluded by A). Detections are listed in a different order every frame. Returns the
+    detections and the true centres (2, T) x of A and B."""
+    xa = torch.tensor([20 + speed * t for t in range(T)])
+    xb = torch.tensor([20 + speed * (T - 1) - speed * t for t in range(T)])
+    dets = []
+    for t in range(T):
+        a, b = box(float(xa[t]), 50), box(float(xb[t]), 52, 18, 36, 0.8)
+        row = [a] if t == hide else ([b, a] if shuffle and t % 2 else [a, b])
+        dets.append(row)
+    return frames_of(*dets), torch.stack([xa, xb])
+
+
+def centre_x(tracks: torch.Tensor) -> torch.Tensor:
+    return (tracks[..., 0] + tracks[..., 2]) / 2
+
+
+def test_two_people_who_cross_keep_their_ids():
+    dets, truth = crossing()
+    tracks = track_people(dets)
+    assert tracks.shape == (2, 12, 5)
+    assert (tracks[..., 4] > 0).all()  # both found in every frame
+    # person 0 is the more prominent (A: larger box, higher score) and stays A in every frame
+    torch.testing.assert_close(centre_x(tracks), truth, atol=1e-4, rtol=0)
+
+
+def test_an_occluded_frame_during_the_crossing_is_bridged_without_a_switch():
+    dets, truth = crossing(hide=6)
+    tracks = track_people(dets)
+    assert tracks.shape[0] == 2
+    torch.testing.assert_close(centre_x(tracks), truth, atol=1e-4, rtol=0)  # B's frame 6 interpolated
+    assert tracks[1, 6, 4] == pytest.approx(0.8)
+
+
+def test_without_the_motion_prediction_a_nearest_box_rule_would_switch():
+    """The scene is hard: at the frame after the crossing, each box overlaps the *other*
+    person's last box more than its own (so an IoU-only tracker swaps the ids)."""
+    dets, truth = crossing(speed=14.0)
+    last_a = torch.tensor(box(float(truth[0, 5]), 50)[:4])
+    now = dets[6][:, :4] if dets[6][0, 4] > 0.85 else dets[6].flip(0)[:, :4]  # row 0: A
+    lo = torch.maximum(last_a[:2], now[:, :2])
+    hi = torch.minimum(last_a[2:], now[:, 2:])
+    inter = (hi - lo).clamp_min(0).prod(-1)
+    assert inter[1] > inter[0]  # A's last box overlaps B's new box more than A's own
+    tracks = track_people(dets)
+    torch.testing.assert_close(centre_x(tracks), truth, atol=1e-4, rtol=0)
+
+
+def test_a_stray_detection_is_dropped_and_a_late_entry_gets_its_own_track():
+    T = 8
+    dets = [[box(30 + 4 * t, 50)] for t in range(T)]
+    dets[2].append(box(200, 20, 10, 10, 0.4))  # one frame only: dropped
+    for t in range(4, T):
+        dets[t].append(box(150, 60 + 3 * t, 30, 60, 0.95))  # enters at frame 4, larger
+    tracks = track_people(frames_of(*dets))
+    assert tracks.shape[0] == 2
+    late = tracks[0]  # the larger box over 4 frames is more prominent than 8 frames of the small one
+    assert (late[:4, 4] == 0).all() and (late[4:, 4] > 0).all() and (late[:4, :4] == 0).all()
+    torch.testing.assert_close(centre_x(tracks[1]), torch.tensor([30.0 + 4 * t for t in range(T)]))
+
+
+def test_a_gap_longer_than_max_gap_ends_the_track():
+    dets = [[box(30 + 2 * t, 50)] if t not in (3, 4, 5) else [] for t in range(10)]
+    assert track_people(frames_of(*dets), max_gap=3).shape[0] == 1
+    split = track_people(frames_of(*dets), max_gap=2)
+    assert split.shape[0] == 2
+    assert ((split[..., 4] > 0).sum(0) <= 1).all()  # never both at once
+    assert (split[0, 6:, 4] > 0).all() and (split[1, :3, 4] > 0).all()  # the longer piece first
+
+
+def test_no_detections_give_no_tracks_and_bad_input_is_named():
+    assert track_people(frames_of([], [])).shape == (0, 2, 5)
+    with pytest.raises(ValueError, match=r"detections\[1\]"):
+        track_people([torch.zeros(0, 5), torch.zeros(3, 4)])
+    with pytest.raises(ValueError, match="max_gap"):
+        track_people(frames_of([]), max_gap=-1)
+    with pytest.raises(ValueError, match="min_iou"):
+        track_people(frames_of([]), min_iou=0)
+
+
+def test_select_people():
+    dets, _ = crossing()
+    tracks = track_people(dets)
+    assert select_people(tracks, "all").shape[0] == 2
+    assert torch.equal(select_people(tracks, "largest"), tracks[:1])
+    assert select_people(tracks, 1).shape[0] == 1 and select_people(tracks, "5").shape[0] == 2
+    assert parse_people("3") == 3
+    for bad in ("some", 0, -1, True, 1.5):
+        with pytest.raises(ValueError, match="people: expected"):
+            parse_people(bad)
