@@ -149,6 +149,11 @@ def test_bad_values_are_one_line_naming_the_option(tmp_path, monkeypatch, capsys
     assert main(["estimate-pose", str(tmp_path / "none.mp4"), "--out", "p.npz"]) == 2
     err = capsys.readouterr().err.strip()
     assert str(tmp_path / "none.mp4") in err and len(err.splitlines()) == 1
+    (tmp_path / "v").mkdir()
+    assert main(["estimate-pose", str(tmp_path / "v"), "--out", "p.npz", "--people", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--people: expected all, largest or a number" in err and len(err.splitlines()) == 1
+    (tmp_path / "v").rmdir()
     assert main(["fit", "--config", str(CONFIGS / "flow_ttt.yaml"), "--data.scene", "x", "--model.lr", "abc"]) == 2
     assert "--model.lr: expected float, got 'abc'" in capsys.readouterr().err
     assert main(["fit", "--config", str(CONFIGS / "flow_ttt.yaml")]) == 2

@@ -163,8 +163,9 @@ def estimate_pose_parser() -> ArgumentParser:
     :func:`lit_boot.estimate.estimate_poses`'s signature: that module imports torch, and the
     help must not."""
     parser = ArgumentParser(prog="lit-boot estimate-pose", description=(
-        "Estimate one person's pose in every frame of a video with MediaPipe Pose (pip install "
-        '"lit-boot[mediapipe]"): COCO-17 keypoints, LSP-14 3D joints and weak-perspective cameras.'))  # fmt: skip
+        "Estimate the pose of one person (with --people: of every person) in every frame of a video with "
+        'MediaPipe Pose (pip install "lit-boot[mediapipe]"): COCO-17 keypoints, LSP-14 3D joints and '
+        "weak-perspective cameras."))  # fmt: skip
     parser.add_argument("video", type=Path, help="a video file (e.g. .mp4) or a folder of frames")
     parser.add_argument("--out", type=Path, required=True, help="pose file to write (.npz or .json)")
     parser.add_argument("--stride", type=int, default=1, help="use every N-th frame")
@@ -179,6 +180,10 @@ def estimate_pose_parser() -> ArgumentParser:
     parser.add_argument("--detector", type=str | None, default=None,
                         help="a YOLOX person detector (yolox_nano, looked up in checkpoints/, or an .onnx path): "
                              "adds the person's box in every frame, where the method zooms (needs no keypoints)")  # fmt: skip
+    parser.add_argument("--people", type=str | None, default=None,
+                        help="all, largest or a number N: a pose for every person the detector tracks (top-down: "
+                             "MediaPipe on each person's crops; --detector defaults to yolox_nano), the most "
+                             "prominent first; unset: one person, MediaPipe on the whole frames")  # fmt: skip
     parser.add_argument("--overwrite", type=bool, nargs="?", const=True, default=False, help="replace --out")
     return parser
 
@@ -189,6 +194,8 @@ def estimate_pose(argv: list[str]) -> int:
     check_video_options("", args.stride, args.max_frames, args.resize)  # before torch is imported
     if not args.video.exists():
         raise CliError(f"VIDEO {args.video}: no such video file or folder of frames")
+    if args.people is not None:
+        _check_people(args.people)
     from ..estimate import MediaPipeUnavailable, estimate_pose_file
 
     options = {k: v for k, v in vars(args).items() if k not in ("video", "out", "overwrite")}
@@ -199,3 +206,9 @@ def estimate_pose(argv: list[str]) -> int:
         raise CliError(str(err)) from None
     print(f"{summary}; wrote {args.out}")
     return 0
+
+
+def _check_people(people: str) -> None:
+    """CliError unless --people is all, largest or a number >= 1 (checked before torch is imported)."""
+    if people not in ("all", "largest") and not (people.isdigit() and int(people) >= 1):
+        raise CliError(f"--people: expected all, largest or a number of people >= 1, got {people!r}")

@@ -9,7 +9,9 @@ the conversions in :mod:`.world_to_lsp` and :mod:`.tracking` need no MediaPipe.
 (YOLOX through onnxruntime, which the same extra installs and which is imported only when a
 detector is built); ``main_person_boxes(detections)`` follows one person over the frames, and
 ``person_boxes(frames, "yolox_nano")`` does both (``estimate_poses(..., detector=...)`` adds them
-to the estimates: the region the method zooms on).
+to the estimates: the region the method zooms on). ``track_people(detections)`` follows every
+person (ids kept through crossings), and ``estimate_poses(..., people="all")`` gives each tracked
+person a pose, top-down (the main person first, the others in ``PoseEstimates.others``).
 """
 
 from .detector import (
@@ -38,6 +40,8 @@ from .mediapipe_pose import (
     run_mediapipe,
     summary_line,
 )
+from .people_pose import estimate_people, pose_in_box
+from .people_track import PEOPLE_CHOICES, parse_people, select_people, track_people
 from .person_track import main_person_boxes, person_boxes
 from .tracking import JUMP_POLICIES, drop_jumps, find_jumps
 from .world_to_lsp import (
@@ -75,6 +79,12 @@ __all__ = [
     "DETECTOR_MODELS",
     "resolve_detector_weights",
     "main_person_boxes",
+    "estimate_people",
+    "pose_in_box",
+    "PEOPLE_CHOICES",
+    "parse_people",
+    "select_people",
+    "track_people",
     "person_boxes",
     "JUMP_POLICIES",
     "drop_jumps",

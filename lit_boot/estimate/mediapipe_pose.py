@@ -232,6 +232,7 @@ def estimate_poses(
     resize: Any = None,
     detector: Any = None,
     crops: bool = False,
+    people: str | int | None = None,
 ) -> PoseEstimates:
     """MediaPipe Pose on every frame of ``video``: frames (T, 3, H, W) uint8 RGB, a Scene, or a
     video file / folder of frames (read with ``read_video(path, stride, max_frames, resize)``;
@@ -242,7 +243,10 @@ def estimate_poses(
     region the method spends resolution on, also where MediaPipe misses the person. There, with
     ``crops``, MediaPipe runs again on crops around the box, enlarged and upsampled
     (:mod:`.crop_pose`; ``metadata["crop_found"]`` counts the frames it found; off by default:
-    on the Sintel samples most of the poses it adds lie on non-human figures). Returns
+    on the Sintel samples most of the poses it adds lie on non-human figures). With ``people``
+    ("all", "largest" or a number N) every tracked person gets a pose instead, top-down
+    (:mod:`.people_pose`: the detector's tracks, default ``"yolox_nano"``, MediaPipe on each
+    one's crops; the main person is the most prominent, the others in ``others``). Returns
     PoseEstimates with source ``mediapipe-<version>``; see the module docstring for conventions."""
     mp = import_mediapipe()
     frame_indices = None
@@ -256,6 +260,9 @@ def estimate_poses(
     if not (isinstance(video, torch.Tensor) and video.ndim == 4 and video.shape[1] == 3 and video.dtype == torch.uint8):
         got = getattr(video, "shape", type(video))
         raise ValueError(f"estimate_poses: expected frames (T, 3, H, W) uint8, a Scene or a path, got {got}")
+    if people is not None:
+        return _people(mp, video, frame_indices, people, detector, model_complexity, min_detection_confidence,
+                       max_jump, on_jump)  # fmt: skip
     raw = run_mediapipe(video, model_complexity, min_detection_confidence, min_tracking_confidence)
     meta = {"model_complexity": model_complexity, "min_detection_confidence": min_detection_confidence,
             "min_tracking_confidence": min_tracking_confidence, "mediapipe_version": mp.__version__,
@@ -276,6 +283,27 @@ def estimate_poses(
         source=f"mediapipe-{mp.__version__}", metadata=meta,
     )  # fmt: skip
     return est if boxes is None else replace(est, person_boxes=boxes)
+
+
+def _people(mp: Any, frames: torch.Tensor, frame_indices: torch.Tensor | None, people: str | int, detector: Any,
+            model_complexity: int, min_detection_confidence: float, max_jump: float, on_jump: str) -> PoseEstimates:  # fmt: skip
+    """Every tracked person's pose, top-down (:func:`~.people_pose.estimate_people`)."""
+    from .detector import PersonDetector
+    from .people_pose import estimate_people
+    from .people_track import parse_people
+
+    people = parse_people(people)
+    detector = detector if isinstance(detector, PersonDetector) else PersonDetector(detector or "yolox_nano")
+    source, size = f"mediapipe-{mp.__version__}", tuple(frames.shape[2:])
+
+    def assemble(landmarks, confidence, world, found):
+        return poses_from_landmarks(landmarks, confidence, world, found, size, frame_indices, max_jump=max_jump,
+                                    on_jump=on_jump, source=source)  # fmt: skip
+
+    meta = {"model_complexity": model_complexity, "min_detection_confidence": min_detection_confidence,
+            "mediapipe_version": mp.__version__, "detector": str(detector.path), "mode": "top-down, static crops"}
+    with _pose_solution(mp, model_complexity, min_detection_confidence, 0.5, static_image_mode=True) as pose:
+        return estimate_people(pose, frames, detector, people, assemble, meta)
 
 
 def _with_crops(mp: Any, raw: dict[str, torch.Tensor], frames: torch.Tensor, boxes: torch.Tensor,
@@ -322,6 +350,9 @@ def summary_line(est: PoseEstimates) -> str:
     mean = float(est.keypoints_conf[found].mean()) if n else 0.0
     jumps = len(est.metadata.get("jumps", []))
     boxes = "" if est.person_boxes is None else f", the person detector's box in {int((est.person_boxes[:, 4] > 0).sum())}"
+    if est.others:
+        seen = ", ".join(str(int((p.keypoints_conf > 0).any(-1).sum())) for p in est.people())
+        boxes += f"; {est.num_people} people (frames with a pose each: {seen})"
     return (f"{T} frames, {n} with a person ({T - n} without){boxes}, mean keypoint confidence {mean:.2f} "
             f"where found, {jumps} tracking jumps; {est.source}")  # fmt: skip
 

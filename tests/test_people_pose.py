@@ -1,0 +1,122 @@
+"""Every person's pose, top-down (lit_boot.estimate.people_pose): a stand-in detector and a
+stand-in MediaPipe on frames with known people, and, with the real models, the street clip."""
+
+from __future__ import annotations
+
+from functools import partial
+from types import SimpleNamespace
+
+import pytest
+import torch
+
+from lit_boot.estimate.mediapipe_pose import poses_from_landmarks
+from lit_boot.estimate.people_pose import estimate_people, pose_in_box
+from test_estimate_mediapipe import _world, needs_mediapipe
+
+H, W = 120, 200
+
+
+class StandingAtTheBrightest:
+    """MediaPipe's stand-in: a standing person whose hips are at the crop's brightest pixel
+    (normalised image coordinates and metres, as MediaPipe gives them); nobody in a dark crop."""
+
+    def __init__(self) -> None:
+        self.world = _world(1)[0]
+
+    def process(self, image):
+        gray = torch.from_numpy(image).float().sum(-1)
+        if gray.max() < 100:
+            return SimpleNamespace(pose_landmarks=None, pose_world_landmarks=None)
+        y, x = divmod(int(gray.argmax()), gray.shape[1])
+        h, w = gray.shape
+        image_lms = [SimpleNamespace(x=(x + 0.5) / w + 0.3 * float(p[0]), y=(y + 0.5) / h + 0.3 * float(p[1]),
+                                     visibility=0.9, presence=1.0, HasField=lambda n: True) for p in self.world]
+        world_lms = [SimpleNamespace(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in self.world]
+        return SimpleNamespace(pose_landmarks=SimpleNamespace(landmark=image_lms),
+                               pose_world_landmarks=SimpleNamespace(landmark=world_lms))  # fmt: skip
+
+
+class KnownBoxes:
+    """The detector's stand-in: the given boxes of each frame."""
+
+    def __init__(self, per_frame):
+        self.per_frame, self.path = per_frame, "known-boxes"
+
+    def detect_frames(self, frames):
+        return [torch.tensor(rows, dtype=torch.float32).reshape(-1, 5) for rows in self.per_frame]
+
+
+def assemble(frames: torch.Tensor):
+    return partial(lambda lm, c, w, f: poses_from_landmarks(lm, c, w, f, (H, W), source="fake"))
+
+
+def two_people(T: int = 4):
+    """A (tall, bright) at x = 40, B (short, dimmer) at x = 150; in the last frame a third
+    bright spot sits just left of B's box, inside B's crop but outside its box."""
+    frames = torch.zeros(T, 3, H, W, dtype=torch.uint8)
+    frames[:, :, 60, 40] = 250
+    frames[:, :, 70, 150] = 200
+    frames[T - 1, :, 70, 150] = 0
+    frames[T - 1, :, 70, 128] = 255  # a neighbour: not B
+    a, b = [20.0, 10.0, 60.0, 110.0, 0.9], [135.0, 40.0, 165.0, 100.0, 0.8]
+    return frames, KnownBoxes([[a, b]] * T)
+
+
+def test_each_tracked_person_gets_the_pose_found_in_their_box():
+    frames, detector = two_people()
+    est = estimate_people(StandingAtTheBrightest(), frames, detector, "all", assemble(frames), {"run": 1})
+    assert est.num_people == 2 and [p.track_id for p in est.people()] == [0, 1]
+    main, other = est.people()
+    hips = lambda p: p.keypoints2d[:, 11:13].mean(1)  # noqa: E731  COCO-17 hips
+    assert torch.allclose(hips(main), torch.tensor([[40.0, 60.0]] * 4), atol=1.0)
+    assert torch.allclose(hips(other)[:3], torch.tensor([[150.0, 70.0]] * 3), atol=1.0)
+    # the last frame's crop around B showed the neighbour outside B's box: not B's pose
+    assert (other.keypoints_conf[3] == 0).all() and (main.keypoints_conf > 0).any(-1).all()
+    assert torch.equal(other.person_boxes[:, :4], torch.tensor([[135.0, 40.0, 165.0, 100.0]] * 4))
+    records = est.metadata["people"]
+    assert [r["not_theirs"] for r in records] == [0, 1] and [r["pose_frames"] for r in records] == [4, 3]
+    assert est.metadata["run"] == 1 and est.cameras is not None and est.others[0].cameras is not None
+
+
+def test_people_largest_or_one_keeps_the_most_prominent_and_a_track_without_a_pose_is_left_out():
+    frames, detector = two_people()
+    largest = estimate_people(StandingAtTheBrightest(), frames, detector, "largest", assemble(frames), {})
+    assert largest.num_people == 1 and largest.person_boxes[0, 0] == 20.0
+    frames[:, :, 60, 40] = 0  # A is dark: the detector's box but no pose
+    est = estimate_people(StandingAtTheBrightest(), frames, detector, "all", assemble(frames), {})
+    assert est.num_people == 1 and est.track_id == 1 and est.metadata["people_without_pose"] == [0]
+
+
+def test_nobody_gives_zero_confidences():
+    frames = torch.zeros(3, 3, H, W, dtype=torch.uint8)
+    est = estimate_people(StandingAtTheBrightest(), frames, KnownBoxes([[]] * 3), "all", assemble(frames), {})
+    assert est.num_people == 1 and not est.found().any() and est.person_boxes is None
+
+
+def test_pose_in_box():
+    kp = torch.tensor([[[10.0, 10.0], [20.0, 30.0]], [[100.0, 10.0], [120.0, 30.0]]])
+    conf = torch.ones(2, 2)
+    boxes = torch.tensor([[0.0, 0.0, 40.0, 40.0, 1.0]] * 2)
+    assert pose_in_box(kp, conf, boxes).tolist() == [True, False]
+
+
+@pytest.mark.shared
+@pytest.mark.mediapipe
+@needs_mediapipe
+def test_the_street_clip_gives_several_people_each_inside_their_track(shared, tmp_path):
+    from lit_boot.data.readers import load_poses
+    from lit_boot.estimate import estimate_pose_file
+
+    out = tmp_path / "street.npz"
+    est, line = estimate_pose_file(shared / "data/videos/street_540p_5f.mp4", out, people="all",
+                                   detector=shared / "checkpoints/yolox_nano.onnx", max_frames=3)  # fmt: skip
+    back = load_poses(out)
+    assert back.num_people >= 3 and "people" in line
+    ids = [p.track_id for p in back.people()]
+    assert len(set(ids)) == len(ids)
+    for person in back.people():
+        assert pose_in_box(person.keypoints2d, person.keypoints_conf, person.person_boxes).sum() == (
+            (person.keypoints_conf > 0).any(-1)).sum()  # fmt: skip
+    boxes = back.person_boxes
+    area = lambda b: ((b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1]) * b[:, 4]).sum()  # noqa: E731
+    assert all(area(boxes) >= area(p.person_boxes) for p in back.others)  # the main person is the most prominent
