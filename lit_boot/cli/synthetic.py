@@ -2,7 +2,7 @@
 
 Every field of :class:`lit_boot.synth.SynthConfig` (and of its ``estimates``,
 ``--estimates.mpjpe_mm``) is an option, read from the dataclass with its docstring's help: a new
-field is a new option.
+field is a new option (``--people 3``: three people who cross and hide each other).
 """
 
 from __future__ import annotations
@@ -49,8 +49,11 @@ def synth(argv: list[str]) -> int:
     scene = make_scene(config)
     save_scene(scene, out, overwrite=args.overwrite)
     print(scene.summary())
+    failures = [len(scene.metadata["keypoint_failures"])]
+    failures += [len(person["keypoint_failures"]) for person in scene.metadata.get("people", [])]
+    per_person = f" ({', '.join(map(str, failures))} per person)" if len(failures) > 1 else ""
     print(f"  estimates: METRO-like MPJPE {config.estimates.mpjpe_mm:g} mm (root-aligned), "
-          f"{len(scene.metadata['keypoint_failures'])} keypoint failure events")  # fmt: skip
+          f"{sum(failures)} keypoint failure events{per_person}")  # fmt: skip
     if args.preview:
         write_png(out / "preview.png", scene_preview(scene))
     print(f"wrote {out}")

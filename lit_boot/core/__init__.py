@@ -13,7 +13,7 @@ from .cameras import (
 )
 from .joints import COCO17, H36M17, LAYOUTS, LSP14, MEDIAPIPE33, JointLayout, get_layout, map_joints, mapping_matrix
 from .people import Person
-from .scene import POSE_MODES, GroundTruth, Scene, SceneValidationError
+from .scene import POSE_MODES, GroundTruth, PersonTruth, Scene, SceneValidationError
 
 __all__ = [
     "CAMERA_MODELS",
@@ -33,6 +33,7 @@ __all__ = [
     "mapping_matrix",
     "GroundTruth",
     "Person",
+    "PersonTruth",
     "POSE_MODES",
     "Scene",
     "SceneValidationError",

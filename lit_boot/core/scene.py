@@ -22,10 +22,28 @@ from .checks import SceneValidationError, check_cameras, check_estimates, check_
 from .joints import get_layout
 from .people import Person, check_people
 
-__all__ = ["Scene", "GroundTruth", "SceneValidationError", "check_estimates", "POSE_MODES"]
+__all__ = ["Scene", "GroundTruth", "PersonTruth", "SceneValidationError", "check_estimates", "POSE_MODES"]
 
 #: The method's two modes: "3d" works from 3D joints with cameras, "2d" from 2D keypoints alone.
 POSE_MODES = ("3d", "2d")
+
+
+@dataclass
+class PersonTruth:
+    """The ground truth of one of a scene's other people (``GroundTruth.others``); every tensor
+    is optional, but all of a scene's others have the same ones.
+
+    track_id: the person's track id (as in ``Scene.others``); joints3d (T, J, 3) mm camera frame
+    and joints2d (T, J, 2) px in the GroundTruth's ``joints_layout``; keypoints2d (T, K, 2) px in
+    the scene's ``keypoints_layout``; person_mask (T, H, W) bool: where this person is the
+    visible surface (inside GroundTruth.person_mask, disjoint from the other people's).
+    """
+
+    track_id: int
+    joints3d: torch.Tensor | None = None
+    joints2d: torch.Tensor | None = None
+    keypoints2d: torch.Tensor | None = None
+    person_mask: torch.Tensor | None = None
 
 
 @dataclass
@@ -35,8 +53,10 @@ class GroundTruth:
     flow (T-1, 2, H, W) px, forward t -> t+1; flow_valid (T-1, H, W) bool (where the flow is
     defined); flow_occluded (T-1, H, W) bool (pixels hidden in frame t+1); joints3d (T, J, 3) mm
     camera frame and joints2d (T, J, 2) px in ``joints_layout``; cameras: the true cameras that
-    project joints3d to joints2d; person_mask (T, H, W) bool; keypoints2d (T, K, 2) px: the
-    true positions of the scene's 2D keypoints (in the scene's ``keypoints_layout``).
+    project joints3d to joints2d; person_mask (T, H, W) bool (every person); keypoints2d (T, K, 2)
+    px: the true positions of the scene's 2D keypoints (in the scene's ``keypoints_layout``).
+    joints3d, joints2d and keypoints2d are the main person's; ``others`` holds the other
+    people's (:class:`PersonTruth`, each with its own visible mask).
     """
 
     flow: torch.Tensor | None = None
@@ -48,6 +68,7 @@ class GroundTruth:
     cameras: Cameras | None = None
     person_mask: torch.Tensor | None = None
     keypoints2d: torch.Tensor | None = None
+    others: tuple[PersonTruth, ...] = ()
 
     def flow_mask(self) -> torch.Tensor | None:
         """Where a flow is scored against ``flow`` (lit-boot's one convention, for FlowTTT's
@@ -80,6 +101,38 @@ class GroundTruth:
                 check_tensor(f"GroundTruth.{key}", value, shape, kind)
         if self.cameras is not None:
             check_cameras("GroundTruth.cameras", self.cameras, T)
+        self._validate_others({key: checks[key] for key in ("joints3d", "joints2d", "keypoints2d", "person_mask")})
+
+    def _validate_others(self, checks: dict[str, tuple[tuple, str]]) -> None:
+        """Check ``others`` against the per-person ``checks`` ({field: (shape, kind)}): PersonTruths
+        with unique track ids >= 0, the same fields present, masks disjoint and inside person_mask."""
+        if not isinstance(self.others, tuple):
+            raise SceneValidationError(f"GroundTruth.others: expected a tuple of PersonTruth, got "
+                                       f"{type(self.others).__name__}")  # fmt: skip
+        ids, union, first = [], None, None
+        for i, person in enumerate(self.others):
+            name = f"GroundTruth.others[{i}]"
+            if not isinstance(person, PersonTruth):
+                raise SceneValidationError(f"{name}: expected a lit_boot PersonTruth, got {type(person).__name__}")
+            if isinstance(person.track_id, bool) or not isinstance(person.track_id, int) or person.track_id < 0:
+                raise SceneValidationError(f"{name}.track_id: expected an int >= 0, got {person.track_id!r}")
+            present = [key for key in checks if getattr(person, key) is not None]
+            first = present if first is None else first
+            if present != first:
+                raise SceneValidationError(f"{name}: expected the fields of GroundTruth.others[0] {first}, "
+                                           f"got {present}")  # fmt: skip
+            for key in present:
+                check_tensor(f"{name}.{key}", getattr(person, key), *checks[key])
+            mask = person.person_mask
+            if mask is not None and self.person_mask is not None and (mask & ~self.person_mask).any():
+                raise SceneValidationError(f"{name}.person_mask: expected pixels inside GroundTruth.person_mask "
+                                           "(every person's)")  # fmt: skip
+            if mask is not None and union is not None and (mask & union).any():
+                raise SceneValidationError(f"{name}.person_mask: expected no pixel of another person's mask")
+            union = mask if union is None else union | mask
+            ids.append(person.track_id)
+        if len(set(ids)) != len(ids):
+            raise SceneValidationError(f"GroundTruth.others: track ids must be unique, got {ids}")
 
 
 @dataclass

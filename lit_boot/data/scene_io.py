@@ -9,8 +9,9 @@ Folder layout (format ``lit-boot-scene``, version 2; version 1, without people, 
 npz keys: joints3d, cameras_params, cameras_crops, keypoints2d, keypoints_conf, person_boxes, and the
 ground truth's gt_flow, gt_flow_valid, gt_flow_occluded, gt_joints3d, gt_joints2d, gt_keypoints2d,
 gt_cameras_params, gt_cameras_crops, gt_person_mask; the other people's fields (``Scene.others``)
-as others_joints3d, others_keypoints2d, ... with a person axis first (P - 1, T, ...). Dtypes are
-kept exactly.
+as others_joints3d, others_keypoints2d, ... and their ground truth (``GroundTruth.others``) as
+gt_others_joints3d, gt_others_joints2d, gt_others_keypoints2d, gt_others_person_mask, each with a
+person axis first (P - 1, T, ...). Dtypes are kept exactly.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import torch
 
 from ..core.cameras import Cameras
 from ..core.people import Person
-from ..core.scene import GroundTruth, Scene, SceneValidationError
+from ..core.scene import GroundTruth, PersonTruth, Scene, SceneValidationError
 from .atomic import atomic_directory, atomic_write_bytes
 from .memory import check_memory, format_bytes
 from .visualize import read_png, write_png
@@ -38,6 +39,7 @@ SCENE_FORMAT = "lit-boot-scene"
 SCENE_FORMAT_VERSION = 2
 _PERSON_TENSORS = ("joints3d", "keypoints2d", "keypoints_conf", "person_boxes")
 _GT_TENSORS = ("flow", "flow_valid", "flow_occluded", "joints3d", "joints2d", "person_mask", "keypoints2d")
+_GT_PERSON_TENSORS = ("joints3d", "joints2d", "keypoints2d", "person_mask")
 
 
 class SceneFormatError(ValueError):
@@ -75,6 +77,10 @@ def _arrays(scene: Scene) -> dict[str, torch.Tensor]:
     if scene.gt is not None:
         out |= {f"gt_{key}": getattr(scene.gt, key) for key in _GT_TENSORS}
         out |= _camera_arrays("gt_cameras", scene.gt.cameras)
+        others = scene.gt.others
+        if others:
+            out |= {f"gt_others_{key}": torch.stack([getattr(p, key) for p in others]) for key in _GT_PERSON_TENSORS
+                    if getattr(others[0], key) is not None}  # fmt: skip
     return {key: value for key, value in out.items() if value is not None}
 
 
@@ -103,8 +109,9 @@ def save_scene(scene: Scene, path: str | os.PathLike, *, overwrite: bool = False
 
     scene.json holds: format, version, name, fps, num_frames, height, width, joints3d_layout,
     keypoints_layout, cameras ({model, crop_size} or null), gt (null or {joints_layout,
-    cameras}), fields ({npz key: dtype} of the present tensors) and metadata (as is; it must
-    load back identical from JSON). The folder is built beside ``path`` and renamed in at the
+    cameras}, plus others: the track ids of GroundTruth.others when it has some), fields ({npz
+    key: dtype} of the present tensors) and metadata (as is; it must load back identical from
+    JSON). The folder is built beside ``path`` and renamed in at the
     end. An existing non-empty ``path`` raises FileExistsError unless ``overwrite`` is True
     and it is itself a saved scene (holds a scene.json); it is then swapped out atomically.
     Any other OSError (read-only folder, disk full) removes the partial copy and is raised
@@ -127,7 +134,8 @@ def save_scene(scene: Scene, path: str | os.PathLike, *, overwrite: bool = False
         "cameras": _camera_json(scene.cameras),
         "track_id": scene.track_id,
         "others": [p.track_id for p in scene.others],
-        "gt": None if gt is None else {"joints_layout": gt.joints_layout, "cameras": _camera_json(gt.cameras)},
+        "gt": None if gt is None else {"joints_layout": gt.joints_layout, "cameras": _camera_json(gt.cameras)}
+        | ({"others": [p.track_id for p in gt.others]} if gt.others else {}),
         "fields": {key: str(value.dtype) for key, value in arrays.items()},
         "metadata": _checked_metadata(scene.metadata),
     }
@@ -262,6 +270,16 @@ def _others(meta: dict[str, Any], arrays: dict[str, torch.Tensor]) -> tuple[Pers
     return tuple(people)
 
 
+def _gt_others(info: dict[str, Any], arrays: dict[str, torch.Tensor]) -> tuple[PersonTruth, ...]:
+    """The other people's ground truth of a saved scene (none before there was any)."""
+    ids = info.get("others", [])
+    if not isinstance(ids, list):
+        raise SceneFormatError(f"scene.json: gt.others must be a list of track ids, got {ids!r}")
+    get = lambda key, i: arrays[f"gt_others_{key}"][i] if f"gt_others_{key}" in arrays else None  # noqa: E731
+    return tuple(PersonTruth(track_id, **{key: get(key, i) for key in _GT_PERSON_TENSORS})
+                 for i, track_id in enumerate(ids))  # fmt: skip
+
+
 def load_scene(path: str | os.PathLike) -> Scene:
     """Load a scene saved by :func:`save_scene`: identical tensors (bit-exact, same dtypes, on
     the CPU), layouts, cameras and metadata. Reads only; writes nothing into the folder.
@@ -282,7 +300,8 @@ def load_scene(path: str | os.PathLike) -> Scene:
         if meta["gt"] is not None:
             tensors = {key: arrays.get(f"gt_{key}") for key in _GT_TENSORS}
             cameras = _cameras(meta["gt"].get("cameras"), arrays, "gt_cameras")
-            gt = GroundTruth(**tensors, joints_layout=meta["gt"]["joints_layout"], cameras=cameras)
+            gt = GroundTruth(**tensors, joints_layout=meta["gt"]["joints_layout"], cameras=cameras,
+                             others=_gt_others(meta["gt"], arrays))  # fmt: skip
         return Scene(
             frames=frames, fps=meta["fps"], name=meta["name"],
             joints3d=arrays.get("joints3d"), joints3d_layout=meta["joints3d_layout"],

@@ -19,7 +19,8 @@ __all__ = ["Appearance"]
 class Appearance:
     """Seeded textures and palettes for one scene.
 
-    materials: one material name per body part (keys of :data:`MATERIALS`).
+    materials: one material name per body part (keys of :data:`MATERIALS`); base_colours:
+    RGB in [0, 1] replacing some materials' base colours (other clothes for another person).
     """
 
     def __init__(
@@ -29,6 +30,7 @@ class Appearance:
         body_texel_mm: float = 8.0,
         background_texel_mm: float = 12.0,
         ambient: float = 0.7,
+        base_colours: dict[str, torch.Tensor] | None = None,
     ):
         g = generator
         self.ambient = ambient
@@ -40,7 +42,8 @@ class Appearance:
         self.bg_noise = periodic_noise((256, 256), 3, g, beta=1.6)
         self.bg_patch = periodic_noise((128, 128), 2, g, beta=2.5)
         jitter = lambda: (torch.rand(3, generator=g) - 0.5) * 0.25  # noqa: E731
-        palette = {name: (torch.tensor(rgb) + jitter()).clamp(0.05, 0.95) for name, (rgb, _) in MATERIALS.items()}
+        bases = {name: torch.tensor(rgb) for name, (rgb, _) in MATERIALS.items()} | (base_colours or {})
+        palette = {name: (rgb + jitter()).clamp(0.05, 0.95) for name, rgb in bases.items()}
         self.part_base = torch.stack([palette[m] for m in materials])  # (P, 3)
         self.part_contrast = torch.tensor([MATERIALS[m][1] for m in materials])  # (P,)
         self.plane_base = torch.stack([torch.rand(3, generator=g) * 0.5 + 0.25 for _ in range(2)])

@@ -15,7 +15,7 @@ import torch
 
 from .skeleton import Motion, Skeleton
 
-__all__ = ["PartSpec", "BODY_PARTS", "MATERIALS", "Body", "PartPoses"]
+__all__ = ["PartSpec", "BODY_PARTS", "MATERIALS", "Body", "PartPoses", "concat_poses"]
 
 
 @dataclass(frozen=True)
@@ -88,6 +88,16 @@ class PartPoses:
         """(T,) the smallest y over all ellipsoid surfaces (body frame: y up)."""
         extent = ((self.axes[..., 1, :] * self.radii) ** 2).sum(-1).sqrt()  # (T, P)
         return (self.centres[..., 1] - extent).amin(-1)
+
+
+def concat_poses(poses: list[PartPoses]) -> PartPoses:
+    """Several bodies' poses as one (their parts one after another, at the same times); a
+    single body's poses are returned as they are."""
+    if len(poses) == 1:
+        return poses[0]
+    per_time = ("centres", "axes", "attach_rot", "attach_pos")
+    return PartPoses(*(torch.cat([getattr(p, k) for p in poses], 1 if k in per_time else 0)
+                       for k in PartPoses.__dataclass_fields__))  # fmt: skip
 
 
 class Body:

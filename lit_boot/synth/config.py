@@ -95,6 +95,9 @@ class SynthConfig:
         shutter: fraction of the frame interval the shutter is open (motion blur).
         name: scene name (default: synth_<motion>_s<seed>).
         estimates: error model of the simulated METRO-like and DCPose-like estimates.
+        people: number of people N. Person 0 is the one the options above describe; the
+            others walk across the frame the other way, at other depths, so that people cross
+            and hide each other (their bodies, clothes and gaits drawn from the seed).
     """
 
     motion: str = "walk"
@@ -120,6 +123,7 @@ class SynthConfig:
     shutter: float = 0.5
     name: str | None = None
     estimates: EstimateConfig = field(default_factory=EstimateConfig)
+    people: int = 1
 
     def __post_init__(self) -> None:
         kinds = (*MOTION_KINDS, "bvh")
@@ -134,6 +138,8 @@ class SynthConfig:
                 raise ValueError(f"SynthConfig.{side}: expected at least 16 px, got {getattr(self, side)}")
         if self.fps <= 0:
             raise ValueError(f"SynthConfig.fps: expected a positive rate, got {self.fps}")
+        if isinstance(self.people, bool) or not isinstance(self.people, int) or self.people < 1:
+            raise ValueError(f"SynthConfig.people: expected a whole number of people >= 1, got {self.people!r}")
         _check_estimates(self.estimates)
 
 

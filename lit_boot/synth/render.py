@@ -1,4 +1,4 @@
-"""Ray casting of ellipsoids and planes: per pixel, the nearest surface.
+"""Ray casting of ellipsoids and planes: per pixel, the nearest surface (of one person or several).
 
 One ray per pixel centre (pixel (x, y) at integer coordinates) from the camera origin, in the
 camera frame (x right, y down, z forward, mm). Ellipsoids are intersected analytically, only
@@ -8,6 +8,7 @@ torch: no Python loop over pixels.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -99,6 +100,31 @@ def _ellipsoid_hits(
     return best, part
 
 
+def _composite(
+    K: Intrinsics,
+    rays: torch.Tensor,
+    centres: torch.Tensor,
+    axes: torch.Tensor,
+    radii: torch.Tensor,
+    first: int,
+    depth: torch.Tensor,
+    part: torch.Tensor,
+    plane: torch.Tensor,
+) -> None:
+    """Draw one person's ellipsoids (parts ``first``, ``first + 1``, ...) over depth, part and
+    plane (H, W), in place, where they are nearer than what is there."""
+    y0, y1, x0, x1 = _person_box(K, centres, radii)
+    if y1 > y0 and x1 > x0 and centres.shape[0] > 0:
+        sub = rays[y0:y1, x0:x1].reshape(-1, 3)
+        s_body, p_body = _ellipsoid_hits(sub, centres, axes, radii)
+        s_body = s_body.view(y1 - y0, x1 - x0)
+        p_body = p_body.view(y1 - y0, x1 - x0)
+        closer = (p_body >= 0) & (s_body < depth[y0:y1, x0:x1])
+        depth[y0:y1, x0:x1] = torch.where(closer, s_body, depth[y0:y1, x0:x1])
+        part[y0:y1, x0:x1] = torch.where(closer, p_body + first, part[y0:y1, x0:x1])
+        plane[y0:y1, x0:x1] = torch.where(closer, torch.full_like(p_body, -1), plane[y0:y1, x0:x1])
+
+
 def cast(
     K: Intrinsics,
     centres: torch.Tensor,
@@ -106,11 +132,14 @@ def cast(
     radii: torch.Tensor,
     planes: torch.Tensor,
     rays: torch.Tensor | None = None,
+    groups: Sequence[slice] | None = None,
 ) -> Hits:
     """Nearest surface per pixel among ellipsoids (camera frame) and planes.
 
     planes (Q, 4): (n, d) with the plane n . x = d in the camera frame. Depth along a
-    z = 1 ray equals the ray parameter.
+    z = 1 ray equals the ray parameter. ``groups``: the ellipsoids of each person (slices of
+    the part axis; default: all of them one person); each is intersected only inside its own
+    box, so the cost grows with the people's boxes, not with the box around all of them.
     """
     rays = pixel_rays(K, centres.dtype) if rays is None else rays
     H, W = K.height, K.width
@@ -122,17 +151,9 @@ def cast(
     plane = torch.where(torch.isfinite(depth), plane, torch.full_like(plane, -1))
     depth = torch.where(torch.isfinite(depth), depth, torch.full_like(depth, FAR_MM))
     part = torch.full((H, W), -1, dtype=torch.long)
-    # Ellipsoids inside the person's box.
-    y0, y1, x0, x1 = _person_box(K, centres, radii)
-    if y1 > y0 and x1 > x0 and centres.shape[0] > 0:
-        sub = rays[y0:y1, x0:x1].reshape(-1, 3)
-        s_body, p_body = _ellipsoid_hits(sub, centres, axes, radii)
-        s_body = s_body.view(y1 - y0, x1 - x0)
-        p_body = p_body.view(y1 - y0, x1 - x0)
-        closer = (p_body >= 0) & (s_body < depth[y0:y1, x0:x1])
-        depth[y0:y1, x0:x1] = torch.where(closer, s_body, depth[y0:y1, x0:x1])
-        part[y0:y1, x0:x1] = torch.where(closer, p_body, part[y0:y1, x0:x1])
-        plane[y0:y1, x0:x1] = torch.where(closer, torch.full_like(p_body, -1), plane[y0:y1, x0:x1])
+    # Each person's ellipsoids inside that person's box, nearer surfaces winning.
+    for group in [slice(0, centres.shape[0])] if groups is None else groups:
+        _composite(K, rays, centres[group], axes[group], radii[group], group.start, depth, part, plane)
     point = rays * depth[..., None]
     # Normals: planes' own; ellipsoids' gradient of the implicit function.
     normal = torch.zeros_like(point)
