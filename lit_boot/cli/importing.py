@@ -100,6 +100,9 @@ def import_parser(kinds: Iterable[str] | None = None) -> ArgumentParser:
         sub.add_argument("--detector", type=str | None, default=None,
                          help="with --estimate: a YOLOX person detector (yolox_nano, looked up in checkpoints/, or "
                               "an .onnx path) for the person's box in every frame, where the method zooms")  # fmt: skip
+        sub.add_argument("--people", type=str | None, default=None,
+                         help="with --estimate: all, largest or a number N: a pose for every person the detector "
+                              "tracks (top-down; --detector defaults to yolox_nano); unset: one person")  # fmt: skip
         sub.add_argument("--out", type=Path, required=True, help="scene folder to write")
         sub.add_argument("--overwrite", type=bool, default=False, help="replace an existing scene folder")
         subcommands.add_subcommand(kind, sub, help=describe(kind))
@@ -111,14 +114,16 @@ def _add_reader_arguments(parser: ArgumentParser, kind: str) -> None:
     set_help(parser, {**ARG_HELP, **ARG_HELP_BY_KIND.get(kind, {})})  # the readers' docstrings are prose, no "Args:"
 
 
-def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None = None):
+def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None = None, people: str | None = None):
     """``scene`` with estimates from the file ``poses`` or from MediaPipe (``estimate``, with the
-    person ``detector``'s boxes when given; a scene in which nobody is found raises
-    :class:`~lit_boot.estimate.NoPersonFound`)."""
+    person ``detector``'s boxes when given, for every tracked person with ``people``; a scene in
+    which nobody is found raises :class:`~lit_boot.estimate.NoPersonFound`)."""
     if poses is not None and estimate:
         raise ValueError("--poses and --estimate: give one of them, not both")
     if detector is not None and not estimate:
         raise ValueError("--detector: needs --estimate true (it adds the person's boxes to the estimated poses)")
+    if people is not None and not estimate:
+        raise ValueError("--people: needs --estimate true (it estimates every person's pose)")
     if poses is not None:
         from ..data.readers import read_estimates
 
@@ -127,7 +132,7 @@ def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None =
         from ..estimate import estimate_poses, require_person
 
         with drop_native_noise():  # MediaPipe's native start-up lines
-            est = estimate_poses(scene.frames, detector=detector)
+            est = estimate_poses(scene.frames, detector=detector, people=people)
         return require_person(est, f"scene {scene.name!r}").apply_to(scene)  # nobody: no pose to bootstrap
     return scene
 
@@ -144,14 +149,19 @@ def import_scene(argv: list[str]) -> int:
     from ..data import save_scene
 
     poses, estimate, detector = options.pop("poses"), options.pop("estimate"), options.pop("detector")
+    people = options.pop("people")
+    if people is not None:
+        _check_people(people)
     out, overwrite = options.pop("out"), options.pop("overwrite")
     refuse_to_overwrite(out, overwrite)
     if args.kind == "video" and not estimate:  # read_video selects and checks the pose rows itself
         if detector is not None:
             raise CliError("--detector: needs --estimate true (it adds the person's boxes to the estimated poses)")
+        if people is not None:
+            raise CliError("--people: needs --estimate true (it estimates every person's pose)")
         scene = _reader("video")(**options, poses=poses)
     else:
-        scene = with_poses(_reader(args.kind)(**options), poses, estimate, detector)
+        scene = with_poses(_reader(args.kind)(**options), poses, estimate, detector, people)
     save_scene(scene, out, overwrite=overwrite)
     print(scene.summary())
     print(f"wrote {out}")

@@ -18,6 +18,7 @@ from .gate import GATE_REPORT_KEYS, gate_sketch
 from .losses import LOSSES, SketchLoss
 from .module import FlowTTT
 from .raft import load_raft, pad_to_multiple, predict_flow, prepare_pair
+from .people_sketch import sketch_people
 from .sketch import FOOTPRINTS, GATE_LEVELS, GATES, SketchConfig, SketchResult, footprint_offsets, sketch_flow, sketch_from_layout, target_flow
 from .warm import FeatureCache, WarmStart
 from .weights import checkpoint_dirs, convert_original_state_dict, load_state_dict_file, resolve_weights
@@ -57,6 +58,7 @@ __all__ = [
     "footprint_offsets",
     "sketch_flow",
     "sketch_from_layout",
+    "sketch_people",
     "target_flow",
     "FeatureCache",
     "WarmStart",

@@ -30,8 +30,9 @@ SOURCE_OF_MODE = {mode: source for source, mode in MODE_OF_SOURCE.items()}
 
 @dataclass
 class SketchInputs:
-    """Joints per pair: joints_t, joints_t1 (P, K, 2) px; confidence_t/_t1 (P, K) or None;
-    depths (P, K) mm at t or None; the joints' layout name."""
+    """Joints per pair: joints_t, joints_t1 (T-1, K, 2) px; confidence_t/_t1 (T-1, K) or None;
+    depths (T-1, K) mm at t or None; the joints' layout name. A scene with several people gives
+    every person's, with a person axis: (T-1, P, K, 2) and (T-1, P, K), the main person first."""
 
     layout: str
     joints_t: torch.Tensor
@@ -49,6 +50,8 @@ def sketch_inputs(scene: Scene, source: str = "auto") -> SketchInputs:
         raise ValueError(f"pose_source: expected one of {POSE_SOURCES}, got {source!r}")
     if source == "auto":
         source = "joints3d" if scene.joints3d is not None and scene.cameras is not None else "keypoints2d"
+    if scene.others and source in MODE_OF_SOURCE:
+        return _people_inputs(scene, MODE_OF_SOURCE[source])
     conf = depths = None
     if source in MODE_OF_SOURCE:
         mode = MODE_OF_SOURCE[source]
@@ -75,6 +78,31 @@ def sketch_inputs(scene: Scene, source: str = "auto") -> SketchInputs:
         confidence_t1=None if conf is None else conf[1:].float(),
         depths=None if depths is None else depths[:-1],
     )
+
+
+def _people_inputs(scene: Scene, mode: str) -> SketchInputs:
+    """Every person's joints of ``mode`` (a person axis after the pair's). In 3D a person counts
+    in the frames where it has a keypoint of confidence > 0 (every frame without keypoints):
+    elsewhere its joints are only a neighbour frame's, filled in."""
+    joints, conf, depths = [], [], []
+    for p in range(scene.num_people):
+        person = scene.person(p)
+        try:
+            points, _ = person.pose_points(mode)
+        except ValueError as err:
+            raise ValueError(f"pose_source {SOURCE_OF_MODE[mode]!r}, person {person.track_id}: {err}") from None
+        joints.append(points.float())
+        if mode == "2d":
+            conf.append(person.keypoints_conf.float())
+        else:
+            seen = person.keypoints_conf
+            seen = torch.ones(points.shape[0]) if seen is None else (seen > 0).any(-1).float()
+            conf.append(seen[:, None].expand(points.shape[:2]))
+            depths.append(person.joints3d[..., 2].float())
+    joints, conf = torch.stack(joints, 1), torch.stack(conf, 1)
+    return SketchInputs(layout=get_layout(scene.pose_layout(mode)).name, joints_t=joints[:-1], joints_t1=joints[1:],
+                        confidence_t=conf[:-1], confidence_t1=conf[1:],
+                        depths=torch.stack(depths, 1)[:-1] if depths else None)  # fmt: skip
 
 
 class ScenePairs(Dataset):

@@ -33,6 +33,7 @@ from .evidence import forward_backward_check
 from .gate import gate_sketch
 from .losses import SketchLoss
 from .raft import load_raft, predict_flow
+from .people_sketch import sketch_people
 from .sketch import SketchConfig, footprint_offsets, sketch_from_layout, target_flow
 from .warm import TUNED_PARTS, WarmStart
 
@@ -229,7 +230,8 @@ class FlowTTT(L.LightningModule):
             raise ValueError(f"base: expected shape {(frames.shape[0] - 1, 2, *frames.shape[-2:])} for scene "
                              f"{scene.name!r}, got {tuple(base.shape)}")  # fmt: skip
         H, W = base.shape[-2:]
-        sketch = sketch_from_layout(
+        draw = sketch_people if inputs.joints_t.ndim == 4 else sketch_from_layout  # every person, or one
+        sketch = draw(
             inputs.layout, inputs.joints_t, inputs.joints_t1, H, W,
             confidence_t=inputs.confidence_t, confidence_t1=inputs.confidence_t1,
             depths=inputs.depths, base_flow=base, config=self.sketch_config,

@@ -189,15 +189,22 @@ def _median(x: Tensor, valid: Tensor) -> Tensor:
     return torch.where(count[..., 0] > 0, median, torch.full_like(median, math.nan))
 
 
-def _plausible_joints(jt: Tensor, jt1: Tensor, ok: Tensor, max_jump: float) -> Tensor:
-    """(B, K) bool: joints whose motion is at most ``max_jump`` x the person's size, the
-    diagonal of the bounding box of the ``ok`` joints of frame t (0 when there are none, or
-    when they are a single point: then any motion is implausible)."""
+def _plausible_joints(jt: Tensor, jt1: Tensor, ok: Tensor, max_jump: float, groups: Tensor | None = None) -> Tensor:
+    """(B, K) bool: joints whose motion is at most ``max_jump`` x their person's size, the
+    diagonal of the bounding box of the person's ``ok`` joints of frame t (0 when there are
+    none, or when they are a single point: then any motion is implausible). ``groups`` (K,)
+    long: the person of each joint (None: one person)."""
+    if groups is None:
+        groups = torch.zeros(jt.shape[1], dtype=torch.long, device=jt.device)
     inf = torch.full_like(jt, math.inf)
-    lo = torch.where(ok[..., None], jt, inf).amin(1)
-    hi = torch.where(ok[..., None], jt, -inf).amax(1)
-    size = torch.where(ok.any(1), (hi - lo).norm(dim=-1), torch.zeros_like(lo[:, 0]))
-    return (jt1 - jt).norm(dim=-1) <= max_jump * size[:, None]
+    size = torch.zeros(jt.shape[:2], dtype=jt.dtype, device=jt.device)
+    for g in torch.unique(groups).tolist():
+        mine = ok & (groups == g)
+        lo = torch.where(mine[..., None], jt, inf).amin(1)
+        hi = torch.where(mine[..., None], jt, -inf).amax(1)
+        person = torch.where(mine.any(1), (hi - lo).norm(dim=-1), torch.zeros_like(lo[:, 0]))
+        size = torch.where(groups == g, person[:, None], size)
+    return (jt1 - jt).norm(dim=-1) <= max_jump * size
 
 
 def _along(x: Tensor, y: Tensor, s0: Tensor, s1: Tensor, u: Tensor) -> Tensor:
@@ -317,6 +324,7 @@ def sketch_flow(
     depths: Tensor | None = None,
     base_flow: Tensor | None = None,
     config: SketchConfig = SketchConfig(),
+    groups: Tensor | None = None,
 ) -> SketchResult:
     """Draw the stick-man flow of B frame pairs (see the module docstring).
 
@@ -324,8 +332,10 @@ def sketch_flow(
     keypoints); bones: (E, 2) index pairs into K; confidence_t, confidence_t1: (B, K) in
     [0, 1] or None (all confident); depths: (B, K) camera z of the frame-t joints (mm; nearer
     wins overlaps) or None (drawing order wins); base_flow: (B, 2, H, W) px, the flow the
-    sketch will be painted over, used by the disagreement guard (skipped when None).
-    Everything is computed on ``joints_t``'s device.
+    sketch will be painted over, used by the disagreement guard (skipped when None); groups:
+    (K,) long, the person each joint belongs to when several are drawn at once (the jump
+    guard's person size is each one's), or None (one person). Everything is computed on
+    ``joints_t``'s device.
     """
     _check_inputs(joints_t, joints_t1, height, width, confidence_t=confidence_t, confidence_t1=confidence_t1,
                   depths=depths)  # fmt: skip
@@ -350,7 +360,8 @@ def sketch_flow(
     conf_ok = ok[:, bones].all(-1)  # (B, E)
     jump_ok = torch.ones_like(conf_ok)
     if config.guard and K > 0:  # person size from the frame-t confident joints
-        jump_ok = _plausible_joints(jt, jt1, ok_t, config.max_joint_jump)[:, bones].all(-1)
+        groups = None if groups is None else torch.as_tensor(groups, dtype=torch.long, device=device)
+        jump_ok = _plausible_joints(jt, jt1, ok_t, config.max_joint_jump, groups)[:, bones].all(-1)
     keep = conf_ok & jump_ok
     rejected = {"confidence": int((~conf_ok).sum()), "jump": int((conf_ok & ~jump_ok).sum()),
                 "disagreement": 0, "points": 0}  # fmt: skip
@@ -395,7 +406,8 @@ def sketch_from_layout(
 ) -> SketchResult:
     """:func:`sketch_flow` with ``layout.sketch_bones``: joints (B, K, 2) in the layout's
     order get its virtual joints appended (joints and depths as the layout's weighted means,
-    confidences as the minimum of their parts). ``bone_drawn`` follows ``layout.sketch_bones``."""
+    confidences as the minimum of their parts). ``bone_drawn`` follows ``layout.sketch_bones``.
+    Several people at once: :func:`~lit_boot.flow.people_sketch.sketch_people`."""
     layout = get_layout(layout)
     jt, ct = layout.with_virtual(joints_t, confidence_t)
     jt1, ct1 = layout.with_virtual(joints_t1, confidence_t1)
