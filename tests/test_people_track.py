@@ -14,7 +14,8 @@ def frames_of(*per_frame: list[list[float]]) -> list[torch.Tensor]:
     return [torch.tensor(f, dtype=torch.float32).reshape(-1, 5) for f in per_frame]
 
 
-def crossing(T: int = 12, speed: float = 8.0, hide: int | None = None, shuffle: bool = True) -> tuple[list[torch.Tensor], torch.Tensor]:
+def crossing(T: int = 12, speed: float = 8.0, hide: int | None = None,
+             shuffle: bool = True) -> tuple[list[torch.Tensor], torch.Tensor]:  # fmt: skip
     """Person A walks right, B (a little smaller) walks left; they cross in the middle, each
     box overlapping the other for several frames. ``hide``: a frame where B is not detected
     (occluded by A). Detections are listed in a different order every frame. Returns the
@@ -106,3 +107,17 @@ def test_select_people():
     for bad in ("some", 0, -1, True, 1.5):
         with pytest.raises(ValueError, match="people: expected"):
             parse_people(bad)
+
+
+def test_a_good_match_is_not_traded_for_two_poor_ones():
+    """Frame 3: A's person is detected where A predicts her; a small stray box lies near A (too
+    far for B), and B, walking the other way, is not detected but could reach A's person. Forcing
+    every track onto a detection would give A the stray and B A's person; A keeps her."""
+    xa = [529.0, 532.0, 535.0, 538.0]
+    dets = [[box(xa[0], 237, 60, 170)],
+            [box(xa[1], 237, 60, 170), box(617.5, 240, 40, 150)],
+            [box(xa[2], 237, 60, 170), box(610.0, 240, 40, 150)],
+            [box(xa[3], 237, 60, 170), box(500.0, 214, 30, 100, 0.5)]]  # fmt: skip
+    tracks = track_people(frames_of(*dets))
+    torch.testing.assert_close(centre_x(tracks[0]), torch.tensor(xa))
+    assert tracks.shape[0] == 2 and (tracks[1, 3, 4] == 0) and (tracks[1, 1:3, 4] > 0).all()

@@ -7,7 +7,8 @@ two people who cross keep their ids. The cost of a detection for a track is ``1 
 predicted box when they overlap by at least ``min_iou``, else ``1 + d / reach`` when the centres
 are ``d`` px apart within ``reach`` = ``max_jump`` x the box's larger side x the frames since it
 was last seen; a detection further away, or more than ``max_scale`` times larger or smaller
-(larger side), is not that track's. A track not seen for more than ``max_gap`` frames ends; an
+(larger side), is not that track's. Leaving a track or a detection unmatched costs
+:data:`MISS_COST` each, so a good match is never traded for two poor ones. A track not seen for more than ``max_gap`` frames ends; an
 unmatched detection starts a new track. Tracks seen in fewer than ``min_frames`` frames (capped
 at T) are dropped (a stray detection), gaps of at most ``max_gap`` frames are bridged by linear
 interpolation of the box and score, and the tracks are ordered by prominence (the sum over
@@ -30,6 +31,8 @@ __all__ = ["track_people", "select_people", "PEOPLE_CHOICES", "parse_people"]
 
 log = logging.getLogger(__name__)
 
+#: The cost of leaving a track or a detection unmatched in a frame (pair costs lie in [0, 2]).
+MISS_COST = 1.0
 #: The named choices of ``people`` (or a number N >= 1: the N most prominent).
 PEOPLE_CHOICES = ("all", "largest")
 
@@ -82,16 +85,23 @@ def _costs(tracks: list[_Track], t: int, dets: torch.Tensor, min_iou: float, max
     return cost.masked_fill(far | (ratio > max_scale) | (ratio < 1 / max_scale), math.inf)
 
 
-def _assign(cost: torch.Tensor) -> list[tuple[int, int]]:
-    """The optimal (track, detection) pairs of finite cost."""
+def _assign(cost: torch.Tensor, miss: float = MISS_COST) -> list[tuple[int, int]]:
+    """The optimal (track, detection) pairs of finite cost, where leaving a track or a detection
+    unmatched costs ``miss`` each (so a pair is matched only where that is cheaper than leaving
+    both alone, and a good match is not traded for two poor ones)."""
     from scipy.optimize import linear_sum_assignment
 
-    if cost.numel() == 0:
+    N, M = cost.shape
+    if N == 0 or M == 0:
         return []
-    finite = torch.isfinite(cost)
-    big = float(cost[finite].max()) + 1e6 if finite.any() else 1e6
-    rows, cols = linear_sum_assignment(torch.where(finite, cost, torch.full_like(cost, big)).numpy())
-    return [(int(r), int(c)) for r, c in zip(rows, cols) if finite[r, c]]
+    never = 1e6
+    full = torch.full((N + M, M + N), never, dtype=torch.float64)
+    full[:N, :M] = torch.where(torch.isfinite(cost), cost.double(), torch.full_like(cost.double(), never))
+    full[:N, M:] = torch.where(torch.eye(N, dtype=torch.bool), miss, never)  # a track left unmatched
+    full[N:, :M] = torch.where(torch.eye(M, dtype=torch.bool), miss, never)  # a detection left unmatched
+    full[N:, M:] = 0.0
+    rows, cols = linear_sum_assignment(full.numpy())
+    return [(int(r), int(c)) for r, c in zip(rows, cols) if r < N and c < M and full[r, c] < never]
 
 
 def _link(detections: Sequence[torch.Tensor], max_gap: int, min_iou: float, max_jump: float,
