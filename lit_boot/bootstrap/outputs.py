@@ -13,6 +13,7 @@ from ..data.flows import write_flows, write_flows_npz
 from .config import BootstrapConfig
 from .decisions import decision_summary
 from .html_report import write_report
+from .overlay import other_people
 from .report import overlay_frames, plot_history, video_fps, write_video
 from .result import BootstrapResult
 
@@ -78,5 +79,6 @@ def write_overlay_video(result: BootstrapResult, mode: str) -> None:
     gt = result.scene.gt
     gt_flow, valid = (gt.flow, gt.flow_mask()) if gt is not None else (None, None)
     mosaic = overlay_frames(result.scene.frames, result.initial_flows, result.flows, before, after, layout,
-                            gt_flow=gt_flow, gt_valid=valid, decisions=result.decisions)  # fmt: skip
+                            gt_flow=gt_flow, gt_valid=valid, decisions=result.decisions,
+                            others=other_people(result.scene, mode))  # fmt: skip
     write_video(mosaic, result.run_dir / "overlay.mp4", fps=video_fps(len(mosaic), result.scene.fps))

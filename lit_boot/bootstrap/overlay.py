@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
 import torch
 from matplotlib import colormaps
 
+from ..core import Scene
 from ..core.joints import JointLayout, get_layout
 from ..data.visualize import draw_skeleton, flow_image
 from .decisions import decision_map
@@ -27,6 +29,11 @@ ERROR_PERCENTILE = 99.0  # of |EPE change| over valid pixels: the error map's sc
 _SAMPLES = 1_000_000  # percentiles from at most about this many values per array
 _INVALID = 128  # grey where a map is not defined (no GT flow; a warp leaving the image)
 CHANGE_CMAP = "Purples"  #: |refined - RAFT| px: white unchanged, dark purple at the scale
+
+
+#: The other people's skeleton colours, one per track (names and RGB for the legend).
+OTHER_COLOURS = ("deepskyblue", "orange", "magenta", "yellow", "cyan", "white")
+OTHER_RGB = ((0, 191, 255), (255, 165, 0), (255, 0, 255), (255, 255, 0), (0, 255, 255), (255, 255, 255))
 
 
 def video_fps(num_frames: int, source_fps: float, seconds: float = 5.0, slowest: float = 2.0) -> float:
@@ -134,9 +141,14 @@ def _legend(width: int, panel: int, flow_scale: float, rows: list[tuple[str, tup
     return image
 
 
-def _key_rows(error_scale: float | None, evidence: tuple[float, float] | None, decisions: dict | None) -> list:
-    """The legend's rows after the flow line (see :func:`_legend`); ``decisions``: the maps drawn."""
+def _key_rows(error_scale: float | None, evidence: tuple[float, float] | None, decisions: dict | None,
+              others: int = 0) -> list:  # fmt: skip
+    """The legend's rows after the flow line (see :func:`_legend`); ``decisions``: the maps drawn;
+    ``others``: how many other people are drawn."""
     rows: list = [("pose before (input)", ("line", (255, 0, 0))), ("pose after (refined)", ("line", (0, 255, 0)))]
+    if others:
+        rows.append((f"the other {others} people's poses, as estimated (one colour per track; the pose stage "
+                     "refines the main person)", ("line", OTHER_RGB[0])))  # fmt: skip
     if error_scale is not None:
         rows.append((f"+-{error_scale:.2g} px: EPE change vs GT, refined - RAFT (blue better, red worse, grey no GT)",
                      ("bar", "RdBu_r")))  # fmt: skip
@@ -221,6 +233,7 @@ def overlay_frames(
     gt_valid: torch.Tensor | None = None,
     legend: bool = True,
     decisions: dict[str, torch.Tensor] | None = None,
+    others: Sequence[torch.Tensor] = (),
 ) -> torch.Tensor:
     """Before/after mosaics, one per frame pair: uint8 (T-1, 3, 2h + key, 3 w).
 
@@ -239,7 +252,9 @@ def overlay_frames(
     and scale, skeleton colours, colour bars). ``decisions`` ({"painted": (T-1, H, W) bool,
     "kept": (T-1, H, W) float, optionally "zoom": (T-1, H, W) float}, see
     :func:`~lit_boot.bootstrap.decisions.final_decisions`) replaces the top-left frame with the
-    decision map (:func:`~lit_boot.bootstrap.decisions.decision_map`). Panels
+    decision map (:func:`~lit_boot.bootstrap.decisions.decision_map`). ``others``: the other
+    people's joints (T, J, 2) px each (NaN: not drawn), drawn under the main person's skeletons
+    in :data:`OTHER_COLOURS`, one per track (:func:`other_people`). Panels
     are h x w = H x W, scaled down (INTER_AREA; joints scaled with them) when the mosaic's
     longer side would exceed ``max_side``. Raises ValueError naming the argument
     for a wrong shape.
@@ -264,12 +279,12 @@ def overlay_frames(
     flow_scale = flow_colour_scale(magnitudes)
     evidence = _evidence_column(frames, flows, (h, w)) if gt_flow is None else None
     scales = evidence[2:] if evidence is not None else None
-    rows = _key_rows(error_scale, scales, decisions)
+    rows = _key_rows(error_scale, scales, decisions, len(others))
     key = _legend(cols * w, min(h, w), flow_scale, rows) if legend else None
     mosaics = []
     for t in range(T - 1):
         frame = torch.from_numpy(np.ascontiguousarray(resize(frames[t].detach().cpu())))
-        pose = draw_poses(frame.permute(2, 0, 1), joints, t, layout, (w / W, h / H))
+        pose = draw_poses(frame.permute(2, 0, 1), joints, t, layout, (w / W, h / H), others)
         before_img, after_img = flow_image(torch.stack([flows["before"][t], flows["after"][t]]), flow_scale)
         if gt_flow is not None:
             pair = valid[t]
@@ -317,11 +332,24 @@ def _epe_change(flows: dict, gt: torch.Tensor, valid: torch.Tensor) -> tuple[dic
     return epe, change, max(0.01, float(np.percentile(_sample(change[valid].abs().numpy()), ERROR_PERCENTILE)))
 
 
-def draw_poses(frame: torch.Tensor, joints: dict, t: int, layout: JointLayout | None, scale: tuple) -> torch.Tensor:
-    """``frame`` (3, h, w) with pair t's skeletons: before in red, after in green (on top);
-    joints are scaled by ``scale`` (sx, sy) about pixel centres."""
-    for j, colour in zip(joints.values(), ("red", "lime")):
+def draw_poses(frame: torch.Tensor, joints: dict, t: int, layout: JointLayout | None, scale: tuple,
+               others: Sequence[torch.Tensor] = ()) -> torch.Tensor:  # fmt: skip
+    """``frame`` (3, h, w) with pair t's skeletons: the other people's (``others``, each (T, J,
+    2) px) in :data:`OTHER_COLOURS`, then the main person's before in red, after in green (on
+    top); joints are scaled by ``scale`` (sx, sy) about pixel centres."""
+    drawn = [(j, OTHER_COLOURS[p % len(OTHER_COLOURS)]) for p, j in enumerate(others)]
+    for j, colour in drawn + list(zip(joints.values(), ("red", "lime"))):
         if j is not None:
             points = (j[t].detach().cpu().float() + 0.5) * torch.tensor(scale) - 0.5
             frame = draw_skeleton(frame, points, layout, color=colour)
     return frame
+
+
+def other_people(scene: Scene, mode: str) -> list[torch.Tensor]:
+    """The pose points of ``mode`` (T, J, 2) px of every person but the main one, NaN where they
+    do not count (:meth:`Scene.pose_points`), in track order."""
+    out = []
+    for p in range(1, scene.num_people):
+        points, keep = scene.person(p).pose_points(mode)
+        out.append(torch.where(keep[..., None], points.float(), float("nan")))
+    return out

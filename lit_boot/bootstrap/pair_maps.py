@@ -26,7 +26,7 @@ from ..flow.evidence import photometric_error
 from .decisions import decision_map
 from .finished import FinishedRun
 from .overlay import (CHANGE_CMAP, change_image, clean_flow, draw_poses, flow_colour_scale, nice_ceiling, resize_image,
-                      sequential_image)  # fmt: skip
+                      other_people, sequential_image)  # fmt: skip
 
 __all__ = ["PairMaps", "Panel", "Scales", "pair_maps", "pair_stats", "shared_scales", "pair_panels", "pick_pairs",
            "CHANGED_PX", "SEQUENTIAL", "DIVERGING"]
@@ -157,14 +157,16 @@ def shared_scales(run: FinishedRun, maps: dict[int, PairMaps]) -> Scales:
 
 
 def _poses_image(run: FinishedRun, t: int, size: tuple[int, int]) -> np.ndarray:
-    """Frame t scaled to ``size`` (h, w) with the initial skeleton in red, the final in green."""
+    """Frame t scaled to ``size`` (h, w) with the initial skeleton in red, the final in green (the
+    other people's, as estimated, under them in their tracks' colours)."""
     scene = run.scene
     frame = torch.from_numpy(np.ascontiguousarray(resize_image(scene.frames[t], size))).permute(2, 0, 1)
     joints = {}
     for name, (points, keep) in (("before", run.initial_points), ("after", run.final_points)):
         joints[name] = torch.where(keep[..., None], points.float(), float("nan"))
     H, W = scene.frames.shape[-2:]
-    drawn = draw_poses(frame, joints, t, scene.pose_layout(run.mode), (size[1] / W, size[0] / H))
+    drawn = draw_poses(frame, joints, t, scene.pose_layout(run.mode), (size[1] / W, size[0] / H),
+                       other_people(scene, run.mode))  # fmt: skip
     return drawn.permute(1, 2, 0).numpy()
 
 
