@@ -75,7 +75,8 @@ def test_apply_to_gives_the_scene_every_person_rescaled_and_selected():
         assert torch.equal(mine.keypoints_conf, theirs.keypoints_conf[[1, 3]])
     assert out.metadata["pose_estimates"][-1]["people"] == [7, 4, 2]
     single = out.person(2)
-    assert single.num_people == 1 and single.track_id == 2 and torch.equal(single.keypoints2d, out.others[1].keypoints2d)
+    assert single.num_people == 1 and single.track_id == 2
+    assert torch.equal(single.keypoints2d, out.others[1].keypoints2d)
     assert single.frames is out.frames
 
 
@@ -86,7 +87,8 @@ def test_the_people_are_validated_by_name():
     with pytest.raises(SceneValidationError, match="track ids must be unique"):
         PoseEstimates(**f, track_id=3, others=(Person(track_id=3, **f),))
     with pytest.raises(SceneValidationError, match=r"others\[0\]: expected the main person's fields"):
-        PoseEstimates(**f, others=(Person(track_id=1, keypoints2d=f["keypoints2d"], keypoints_conf=f["keypoints_conf"]),))
+        PoseEstimates(**f, others=(Person(track_id=1, keypoints2d=f["keypoints2d"], keypoints_conf=f["keypoints_conf"]),
+                                   ))  # fmt: skip
     with pytest.raises(SceneValidationError, match="others: expected a tuple"):
         Scene(torch.zeros(T, 3, 8, 8, dtype=torch.uint8), **f, others=[Person(track_id=1, **f)])
     scene = Scene(torch.zeros(T, 3, 8, 8, dtype=torch.uint8), **f, others=(Person(track_id=1, **f),))
@@ -106,3 +108,13 @@ def test_a_saved_scene_and_its_chunks_keep_every_person(tmp_path):
     assert cut.num_people == 3
     for a, b in zip(cut.people(), scene.people()):
         assert torch.equal(a.keypoints2d, b.keypoints2d[1:3]) and torch.equal(a.cameras.crops, b.cameras.crops[1:3])
+
+
+def test_a_synthetic_scene_with_several_people_is_cut_with_every_persons_truth():
+    from lit_boot.synth import make_scene
+
+    scene = make_scene(frames=5, height=64, width=128, people=2, seed=0)
+    cut = slice_scene(scene, 1, 4)
+    assert cut.num_people == 2 and len(cut.gt.others) == 1
+    assert torch.equal(cut.gt.others[0].person_mask, scene.gt.others[0].person_mask[1:4])
+    assert torch.equal(cut.others[0].keypoints2d, scene.others[0].keypoints2d[1:4])

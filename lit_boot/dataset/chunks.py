@@ -103,7 +103,9 @@ def _cut_gt(gt: GroundTruth | None, start: int, stop: int) -> GroundTruth | None
         return None
     fields = {key: _cut(getattr(gt, key), start, stop) for key in _GT_FRAMES}
     fields |= {key: _cut(getattr(gt, key), start, stop - 1) for key in _GT_PAIRS}  # pairs t -> t+1
-    return dataclasses.replace(gt, **fields, cameras=_cut_cameras(gt.cameras, start, stop))
+    others = tuple(dataclasses.replace(p, **{key: _cut(getattr(p, key), start, stop) for key in _GT_FRAMES})
+                   for p in gt.others)  # fmt: skip
+    return dataclasses.replace(gt, **fields, cameras=_cut_cameras(gt.cameras, start, stop), others=others)
 
 
 def _cut_events(events: list[Any], start: int, stop: int) -> list[Any]:
