@@ -168,6 +168,29 @@ def test_zoom_flows_records_every_pair(monkeypatch):
     assert box_masks(boxes, (96, 128))[1, 30:61, 40:81].all() and not box_masks(boxes, (96, 128))[:, :30].any()
 
 
+def test_every_person_is_zoomed_in_turn(monkeypatch):
+    from lit_boot.bootstrap.zoom import _zoom_people, zoom_line
+    from lit_boot.core import Person
+
+    frames = _textured_pair(3, frames=3)
+    a = torch.tensor([[10.0, 30, 50, 60, 1]] * 3)
+    b = torch.tensor([[80.0, 20, 120, 70, 1]] * 3)
+    conf = torch.ones(3, 17)
+    scene = lit_boot.Scene(frames=frames, keypoints2d=torch.full((3, 17, 2), 20.0), keypoints_conf=conf,
+                           person_boxes=a, others=(Person(track_id=4, keypoints2d=torch.full((3, 17, 2), 90.0),
+                                                          keypoints_conf=conf, person_boxes=b),))  # fmt: skip
+    truth = torch.full((2, 96, 128), 3.0)
+    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates: truth[
+        :, crop[0] : crop[1], crop[2] : crop[3]])  # fmt: skip
+    base = torch.zeros(2, 2, 96, 128)
+    flows, kept, record, person = _zoom_people(None, scene, base, "2d", ZoomConfig())
+    main_only = zoom_flows(None, scene.person(0), base, a, ZoomConfig())[1]
+    assert kept[:, 30:61, 80:121].any() and not main_only[:, :, 75:].any()  # the second person's box zoomed too
+    assert person[:, 30:61, 10:51].all() and person[:, 20:71, 80:121].all()
+    assert [p["track_id"] for p in record["people"]] == [0, 4] and record["zoomed_pairs"] == 4
+    assert "4 pairs of 2 people (2 pairs each) zoomed" in zoom_line(record, 2)
+
+
 def test_person_boxes_come_from_the_pose_when_the_scene_has_none():
     scene = lit_boot.make_scene(motion="run", frames=3, height=64, width=96, seed=0)
     boxes = person_boxes(scene, "2d")

@@ -13,7 +13,8 @@ motion). The zoomed flow replaces RAFT's pixel by pixel where both hold:
 
 The result is the flow the flow stages start from and are checked against. The person's box per
 frame: the scene's ``person_boxes`` when it has them (a person detector), else the box around
-the pose's points (:func:`~lit_boot.flow.zoom.boxes_from_points`).
+the pose's points (:func:`~lit_boot.flow.zoom.boxes_from_points`). A scene with several people
+is zoomed on every person's box in turn, the main person first.
 """
 
 from __future__ import annotations
@@ -119,23 +120,50 @@ def zoom_stage(raft: RAFT, scene: Scene, initial: Tensor, *, mode: str, config: 
     ``mode``. Returns (the stage's record: the flow's metrics (GT when the scene has it, and the
     evidence), drift outside the person's boxes, ``info["zoom"]``; the flows (T-1, 2, H, W) px;
     the decision maps: nothing painted, ``kept`` the zoomed flow's pixels)."""
-    boxes = person_boxes(scene, mode)
     original = next(raft.parameters()).device
     raft.to(device)
     try:
-        flows, kept, zoom = zoom_flows(raft, scene, initial, boxes, config)
+        flows, kept, zoom, person = _zoom_people(raft, scene, initial, mode, config)
     finally:
         raft.to(original)
-    person = box_masks(boxes, tuple(flows.shape[-2:]))
     record = {**scene_flow_metrics(scene.gt, flows), "drift_px": drift(flows, initial, person),
               "agreement_px": agreement(flows, *scene.pose_points(mode)),
               "photo_error": photo_error(scene.frames, flows), "info": {"zoom": zoom}}  # fmt: skip
     return record, flows, {"painted": torch.zeros_like(kept), "kept": kept.float()}
 
 
+def _zoom_people(raft: RAFT, scene: Scene, initial: Tensor, mode: str,
+                 config: ZoomConfig) -> tuple[Tensor, Tensor, dict[str, Any], Tensor]:  # fmt: skip
+    """:func:`zoom_flows` on every person's boxes in turn (the main person first, each over the
+    flows the previous one left). Returns the flows, the kept pixels, the record (one person's
+    as :func:`zoom_flows` gives it; with several, the pairs, cost and seconds summed, ``per_pair``
+    every person's in turn and ``people``: each one's track id, zoomed pairs and kept fraction)
+    and every person's boxes as one (T-1, H, W) mask."""
+    flows, kept, records = initial, None, []
+    person = torch.zeros(initial.shape[0], *initial.shape[-2:], dtype=torch.bool)
+    for p in range(scene.num_people):
+        one = scene.person(p)
+        boxes = person_boxes(one, mode)
+        flows, kept_p, record = zoom_flows(raft, one, flows, boxes, config)
+        kept = kept_p if kept is None else kept | kept_p
+        person |= box_masks(boxes, tuple(flows.shape[-2:]))
+        records.append((one.track_id, record))
+    if len(records) == 1:
+        return flows, kept, records[0][1], person
+    zoom = {"kept_fraction": float(kept.float().mean()), "zoomed_pairs": sum(r["zoomed_pairs"] for _, r in records),
+            "cost": round(sum(r["cost"] for _, r in records), 4), "seconds": sum(r["seconds"] for _, r in records),
+            "per_pair": [pair for _, r in records for pair in r["per_pair"]],
+            "people": [{"track_id": i, "zoomed_pairs": r["zoomed_pairs"], "kept_fraction": r["kept_fraction"]}
+                       for i, r in records]}  # fmt: skip
+    return flows, kept, zoom, person
+
+
 def zoom_line(record: dict[str, Any], pairs: int) -> str:
     """One line for the console: how many pairs were zoomed, at which scales, what was kept."""
     scales = [p["scale"] for p in record["per_pair"] if p["region"] is not None]
     at = f" at {min(scales):.2f}-{max(scales):.2f}x" if scales else ""
-    return (f"  zoom: {record['zoomed_pairs']} of {pairs} pairs zoomed{at} (cost {record['cost']:.1f} RAFT passes); "
+    people = record.get("people")
+    zoomed = (f"{record['zoomed_pairs']} pairs of {len(people)} people ({pairs} pairs each) zoomed" if people
+              else f"{record['zoomed_pairs']} of {pairs} pairs zoomed")  # fmt: skip
+    return (f"  zoom: {zoomed}{at} (cost {record['cost']:.1f} RAFT passes); "
             f"the zoomed flow kept on {100 * record['kept_fraction']:.1f}% of the pixels, RAFT's elsewhere")
