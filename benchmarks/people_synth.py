@@ -10,7 +10,8 @@ and motions below, 8 frames, 128x256, the default preset (3D or ``--mode 2d``).
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/people_synth.py [--mode 3d|2d] [--people 2,3] [--seeds 30,31]
-      [--weights ../shared/checkpoints/raft-small.pth] [--out /tmp/people_synth] [--json out.json]
+      [--variants every,main] [--weights ../shared/checkpoints/raft-small.pth] [--out /tmp/people_synth]
+      [--json out.json]
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ def main() -> None:
     p.add_argument("--seeds", default="30,31")
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))
     p.add_argument("--out", default="/tmp/people_synth")
+    p.add_argument("--variants", default="every,main", help="every (the scene as generated), main (person 0 alone)")
     p.add_argument("--json", default=None)
     args = p.parse_args()
     rows = []
@@ -61,7 +63,8 @@ def main() -> None:
         for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
             scene = make_scene(frames=8, height=128, width=256, motion=MOTIONS[i % len(MOTIONS)], seed=seed, people=n)
             people, background = masks(scene)
-            for variant, run_scene in (("every person", scene), ("main person only", scene.person(0))):
+            variants = {"every": ("every person", scene), "main": ("main person only", scene.person(0))}
+            for variant, run_scene in (variants[v] for v in args.variants.split(",")):
                 out = Path(args.out) / f"p{n}_s{seed}_{variant.split()[0]}"
                 shutil.rmtree(out, ignore_errors=True)
                 start = time.perf_counter()

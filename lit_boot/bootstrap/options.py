@@ -89,6 +89,7 @@ class PoseOptions(TypedDict, total=False):
     pixel_scale: float
     eval_every_n_steps: int
     num_threads: int | None
+    people: str
 
 
 def check_options(name: str, options: Any, kind: type) -> None:

@@ -147,8 +147,8 @@ def _key_rows(error_scale: float | None, evidence: tuple[float, float] | None, d
     ``others``: how many other people are drawn."""
     rows: list = [("pose before (input)", ("line", (255, 0, 0))), ("pose after (refined)", ("line", (0, 255, 0)))]
     if others:
-        rows.append((f"the other {others} people's poses, as estimated (one colour per track; the pose stage "
-                     "refines the main person)", ("line", OTHER_RGB[0])))  # fmt: skip
+        rows.append((f"the other {others} people's poses after the run (one colour per track)",
+                     ("line", OTHER_RGB[0])))
     if error_scale is not None:
         rows.append((f"+-{error_scale:.2g} px: EPE change vs GT, refined - RAFT (blue better, red worse, grey no GT)",
                      ("bar", "RdBu_r")))  # fmt: skip

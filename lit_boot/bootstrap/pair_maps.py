@@ -158,7 +158,7 @@ def shared_scales(run: FinishedRun, maps: dict[int, PairMaps]) -> Scales:
 
 def _poses_image(run: FinishedRun, t: int, size: tuple[int, int]) -> np.ndarray:
     """Frame t scaled to ``size`` (h, w) with the initial skeleton in red, the final in green (the
-    other people's, as estimated, under them in their tracks' colours)."""
+    other people's, after the run, under them in their tracks' colours)."""
     scene = run.scene
     frame = torch.from_numpy(np.ascontiguousarray(resize_image(scene.frames[t], size))).permute(2, 0, 1)
     joints = {}

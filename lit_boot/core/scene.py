@@ -79,6 +79,17 @@ class GroundTruth:
         mask = self.flow_valid if self.flow_valid is not None else torch.ones_like(self.flow[:, 0], dtype=torch.bool)
         return mask & ~self.flow_occluded if self.flow_occluded is not None else mask
 
+    def truths(self, track_ids: Sequence[int]) -> list[PersonTruth | None]:
+        """Each person's truth, in ``track_ids`` order: the first id is the main person (this
+        GroundTruth's own joints and keypoints; its visible mask the person mask less the
+        others'), the rest are looked up in ``others`` by track id (None: no ground truth)."""
+        by_id = {person.track_id: person for person in self.others}
+        mask = self.person_mask
+        if mask is not None and self.others and all(o.person_mask is not None for o in self.others):
+            mask = mask & ~torch.stack([o.person_mask for o in self.others]).any(0)
+        main = PersonTruth(int(track_ids[0]), self.joints3d, self.joints2d, self.keypoints2d, mask)
+        return [main, *(by_id.get(int(i)) for i in track_ids[1:])]
+
     def validate(self, T: int, H: int, W: int, keypoints_layout: str = "coco17") -> None:
         """Check every present field against the scene's T, H, W and keypoint layout."""
         try:

@@ -37,13 +37,22 @@ from .pose import (
     scale_align,
 )
 from .states import METRIC_NAMES, compute_metric_states, merge_metric_states, scene_metric_states
-from .suite import FlowMetrics, PoseMetrics, scene_flow_metrics, scene_pose_metrics
+from .suite import (
+    FlowMetrics,
+    PoseMetrics,
+    base_metric_name,
+    people_metric_objects,
+    scene_flow_metrics,
+    scene_pose_metrics,
+)
 
 __all__ = [
     "FlowMetrics",
     "PoseMetrics",
     "scene_flow_metrics",
     "scene_pose_metrics",
+    "people_metric_objects",
+    "base_metric_name",
     "METRIC_NAMES",
     "scene_metric_states",
     "merge_metric_states",

@@ -7,7 +7,9 @@ as plain floats ``{metric name: {state name: value}}`` (JSON-ready, exact):
 - ``epe``, ``epe_person``, ``epe_background``, ``epe_joints``: ``{"epe_sum", "count"}`` (px, pixels
   or joints);
 - ``mpjpe_mm``, ``pa_mpjpe_mm``, ``accel_mm_per_frame2``, ``proj2d_px``, ``kp2d_px``:
-  ``{"error_sum", "count"}`` (mm, mm/frame^2 or px; joints of frames).
+  ``{"error_sum", "count"}`` (mm, mm/frame^2 or px; joints of frames);
+- with several people, the same under the pooled and per-person names (``kp2d_px_all``,
+  ``kp2d_px_person3``: :func:`~lit_boot.metrics.suite.people_metric_objects`).
 
 Summing them over scenes (:func:`merge_metric_states`) and computing (:func:`compute_metric_states`)
 gives what one process scoring every scene at once would: every pixel / joint weighs the same.
@@ -22,7 +24,7 @@ from torch import Tensor
 from torchmetrics import Metric
 
 from ..core import Scene
-from .suite import FlowMetrics, PoseMetrics, scene_flow_metric_objects, scene_pose_metric_objects
+from .suite import FlowMetrics, PoseMetrics, base_metric_name, scene_flow_metric_objects, scene_pose_metric_objects
 
 __all__ = ["METRIC_NAMES", "scene_metric_states", "merge_metric_states", "compute_metric_states"]
 
@@ -68,7 +70,8 @@ def merge_metric_states(states: Iterable[States]) -> States:
 
 
 def _blank(name: str) -> Metric:
-    """A fresh metric of the class that reports ``name``."""
+    """A fresh metric of the class that reports ``name`` (also a pooled or per-person name)."""
+    name = base_metric_name(name)
     if name in _FLOW_NAMES:
         return getattr(FlowMetrics(), name)
     if name in _POSE_MEMBERS:

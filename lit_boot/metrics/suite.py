@@ -12,6 +12,9 @@ records, summary.json, :class:`~lit_boot.pose.PoseResult`):
   projected joints against the GT 2D joints), ``kp2d_px`` (2D mode: the keypoints against the
   GT keypoints).
 
+With several people the bare names are the main person's, ``<name>_all`` pools every person
+with ground truth, ``<name>_person<track id>`` is one other person's (:func:`people_metric_objects`).
+
 Lightning modules log them as ``val/<name>``; the orchestrator's records and the pose results
 hold the bare names. EPE-like means pool every selected pixel (or joint) of every pair.
 ``scene_flow_metric_objects`` / ``scene_pose_metric_objects`` give the updated ``Metric``
@@ -25,7 +28,9 @@ import torch.nn.functional as F
 from torch import Tensor
 from torchmetrics import Metric
 
-from ..core import GroundTruth, Scene, get_layout, inside_image
+import re
+
+from ..core import GroundTruth, Person, PersonTruth, Scene, get_layout, inside_image
 from .flow import EndPointError, PointEndPointError
 from .pose import AccelerationError, MeanPerJointPositionError, Root
 
@@ -36,7 +41,17 @@ __all__ = [
     "scene_pose_metrics",
     "scene_flow_metric_objects",
     "scene_pose_metric_objects",
+    "people_metric_objects",
+    "base_metric_name",
+    "POOLED_SUFFIX",
+    "PERSON_SUFFIX",
 ]
+
+#: Name suffixes of the metrics of scenes with several people: ``kp2d_px_all`` pools every
+#: person, ``kp2d_px_person3`` is track 3's; the bare name is the main person's.
+POOLED_SUFFIX = "_all"
+PERSON_SUFFIX = "_person"
+_PEOPLE_NAME = re.compile(rf"(.+?)(?:{POOLED_SUFFIX}|{PERSON_SUFFIX}\d+)")
 
 
 def _values(metrics: dict[str, Metric]) -> dict[str, float]:
@@ -151,27 +166,61 @@ def scene_flow_metrics(gt: GroundTruth | None, flows: Tensor) -> dict[str, float
     return _values(scene_flow_metric_objects(gt, flows))
 
 
+def _person_pose_metric_objects(scene: Scene, person: Person, truth: PersonTruth, mode: str) -> dict[str, Metric]:
+    """One person's pose metrics against its truth (the layouts: the scene's and its GT's)."""
+    if mode == "2d":
+        if truth.keypoints2d is None or person.keypoints2d is None:
+            return {}
+        return PoseMetrics().points2d_metrics("kp2d_px", person.keypoints2d.float(), truth.keypoints2d.float())
+    if person.joints3d is None or get_layout(scene.gt.joints_layout) != get_layout(scene.joints3d_layout):
+        return {}
+    metrics = PoseMetrics(root=get_layout(scene.joints3d_layout).root or (0,))
+    joints = person.joints3d.float()
+    out = metrics.joints3d_metrics(joints, truth.joints3d.float()) if truth.joints3d is not None else {}
+    if truth.joints2d is not None and person.cameras is not None:
+        out.update(metrics.points2d_metrics("proj2d_px", person.cameras.project(joints), truth.joints2d.float()))
+    return out
+
+
+def people_metric_objects(per_person: list[dict[str, Metric]], track_ids: list[int]) -> dict[str, Metric]:
+    """Every person's metrics under one set of names: the main person's (the first) under the
+    bare names; with several people also ``<name>_all`` (pooled over every person scored: their
+    states merged) and ``<name>_person<track id>`` for each other person."""
+    out = dict(per_person[0])
+    if len(per_person) < 2:
+        return out
+    for name in dict.fromkeys(name for metrics in per_person for name in metrics):
+        scored = [metrics[name] for metrics in per_person if name in metrics]
+        pooled = scored[0].clone()
+        for metric in scored[1:]:
+            pooled.merge_state(metric)
+        out[f"{name}{POOLED_SUFFIX}"] = pooled
+    for track_id, metrics in zip(track_ids[1:], per_person[1:]):
+        out.update({f"{name}{PERSON_SUFFIX}{track_id}": metric for name, metric in metrics.items()})
+    return out
+
+
+def base_metric_name(name: str) -> str:
+    """The metric a (pooled or per-person) name reports: ``kp2d_px_person3`` -> ``kp2d_px``."""
+    match = _PEOPLE_NAME.fullmatch(name)
+    return match.group(1) if match else name
+
+
 @torch.no_grad()
 def scene_pose_metric_objects(scene: Scene, mode: str) -> dict[str, Metric]:
     """The updated metrics behind :func:`scene_pose_metrics`, by name; {} without GT."""
-    gt = scene.gt
-    if gt is None:
+    if scene.gt is None:
         return {}
-    if mode == "2d":
-        if gt.keypoints2d is None or scene.keypoints2d is None:
-            return {}
-        return PoseMetrics().points2d_metrics("kp2d_px", scene.keypoints2d.float(), gt.keypoints2d.float())
-    if scene.joints3d is None or get_layout(gt.joints_layout) != get_layout(scene.joints3d_layout):
-        return {}
-    metrics = PoseMetrics(root=get_layout(scene.joints3d_layout).root or (0,))
-    out = metrics.joints3d_metrics(scene.joints3d.float(), gt.joints3d.float()) if gt.joints3d is not None else {}
-    if gt.joints2d is not None and scene.cameras is not None:
-        projected = scene.cameras.project(scene.joints3d.float())
-        out.update(metrics.points2d_metrics("proj2d_px", projected, gt.joints2d.float()))
-    return out
+    people = scene.people()
+    ids = [person.track_id for person in people]
+    truths = scene.gt.truths(ids)
+    per_person = [{} if truth is None else _person_pose_metric_objects(scene, person, truth, mode)
+                  for person, truth in zip(people, truths)]  # fmt: skip
+    return people_metric_objects(per_person, ids)
 
 
 def scene_pose_metrics(scene: Scene, mode: str) -> dict[str, float]:
     """The scene's current estimates against its ground truth: 3D mode, the 3D joints (GT in
-    the same layout) and their projection (GT 2D joints); 2D mode, ``kp2d_px``; {} without GT."""
+    the same layout) and their projection (GT 2D joints); 2D mode, ``kp2d_px``; {} without GT.
+    With several people: also pooled and per person (:func:`people_metric_objects`)."""
     return _values(scene_pose_metric_objects(scene, mode))

@@ -27,12 +27,13 @@ import torch
 from lightning.pytorch.callbacks import Callback
 from lightning.pytorch.trainer.states import TrainerFn
 
-from ..core import Scene
+from ..core import Person, Scene
 from ..data.readers.pose_file import PoseEstimates
 from ..finite import FiniteGuard, finite_fault
 from ..optim import adam
 from .keypoints import CONFIDENCE_MODES
 from .losses import flow_residual, inside_image
+from .people import PEOPLE_CHOICES
 from .result import PoseResult
 from .stopping import LossPlateauStopping
 
@@ -82,6 +83,8 @@ class RefinerBase(L.LightningModule):
         num_threads: torch CPU threads during fitting (restored afterwards); None leaves them.
             The problem is small: one thread avoids thread-synchronisation costs that, on a
             busy CPU, made a step of this size several times slower.
+        people: "all" refines every person of the scene at once (:mod:`lit_boot.pose.people`),
+            "main" the main person alone (the others keep their estimates).
     """
 
     mode = "3d"
@@ -93,8 +96,11 @@ class RefinerBase(L.LightningModule):
         save: bool = True,
         output_dir: str | None = None,
         num_threads: int | None = 1,
+        people: str = "all",
     ):
         super().__init__()
+        if people not in PEOPLE_CHOICES:
+            raise ValueError(f"people: expected one of {PEOPLE_CHOICES}, got {people!r}")
         if lr <= 0:
             raise ValueError(f"lr: expected a positive learning rate, got {lr}")
         self.scene_name = "scene"
@@ -103,6 +109,7 @@ class RefinerBase(L.LightningModule):
         self.metrics_before: dict[str, float] = {}
         self._started = 0.0
         self._scene_key: tuple | None = None
+        self.track_ids: list[int] = [0]
 
     def save_settings(self, loss_weights: Any, weights_type: type, confidence: str) -> None:
         """The constructor tail both refiners share; a subclass's ``__init__`` calls it.
@@ -156,10 +163,13 @@ class RefinerBase(L.LightningModule):
     def make_result(self) -> PoseResult:
         raise NotImplementedError
 
-    def result_with(self, mode: str, **poses: Any) -> PoseResult:
-        """This fit's :class:`PoseResult`: the refined ``poses`` (PoseEstimates fields) for the
-        scene's frames, with the report (steps, early stop, loss, metrics, settings)."""
-        estimates = PoseEstimates(**poses, frame_indices=self.frame_indices, image_size=self.image_size,
+    def result_with(self, mode: str, people: list[Person], **layouts: Any) -> PoseResult:
+        """This fit's :class:`PoseResult`: ``people``'s refined poses (the main person first; the
+        fields their mode has) for the scene's frames in ``layouts`` (``keypoints_layout`` or
+        ``joints3d_layout``), with the report (steps, early stop, loss, metrics, settings)."""
+        main, *others = people
+        estimates = PoseEstimates(**main.fields(), track_id=main.track_id, others=tuple(others), **layouts,
+                                  frame_indices=self.frame_indices, image_size=self.image_size,
                                   source=f"lit-boot {type(self).__name__}")  # fmt: skip
         return PoseResult(
             mode=mode, estimates=estimates, scene=self.scene_name, steps=int(self.global_step),

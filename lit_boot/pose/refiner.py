@@ -12,6 +12,9 @@ beta 1, summed over elements, averaged over frames, times its lambda)::
       + cam * |C_t - C_t-1|              camera smoothness
       + bone * |len_t - len_t-1|         bone-length constancy (the layout's length_bones), m
       + proj_smooth * |P_t - P_t-1|      2D smoothness (the authors' code, lambda 0), px
+
+Every person of a scene is refined at once, each with its own cameras: joints (T, P, J, 3),
+camera variables (T, P, 3) (:mod:`lit_boot.pose.people`).
 """
 
 from __future__ import annotations
@@ -22,13 +25,14 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from ..core import Scene, get_layout
+from ..core import Person, Scene, get_layout
 from ..metrics import PoseMetrics
 from .base import RefinerBase
 from .camera import CameraModel
 from .keypoints import keypoints_for_layout
 from .losses import bone_lengths, bone_matrix, inside_image, temporal_residual
 from .objective import Objective, Term
+from .people import TruthIndex, people_metrics, refined_people, side_by_side, unrefined_people
 from .result import PoseResult
 
 __all__ = ["PoseLossWeights", "PoseRefiner", "inside_image"]
@@ -73,6 +77,8 @@ class PoseRefiner(RefinerBase):
         save: write the refined poses into ``output_dir`` at the end of fitting.
         output_dir: where to save (default: the trainer's log_dir).
         num_threads: torch CPU threads during fitting (restored afterwards); None leaves them.
+        people: "all" refines every person of the scene at once (each with its own cameras),
+            "main" the main person alone.
     """
 
     mode = "3d"
@@ -90,8 +96,9 @@ class PoseRefiner(RefinerBase):
         save: bool = True,
         output_dir: str | None = None,
         num_threads: int | None = 1,
+        people: str = "all",
     ):
-        super().__init__(lr, eval_every_n_steps, save, output_dir, num_threads)
+        super().__init__(lr, eval_every_n_steps, save, output_dir, num_threads, people)
         if pixel_scale <= 0:
             raise ValueError(f"pixel_scale: expected a positive factor, got {pixel_scale}")
         self.save_settings(loss_weights, PoseLossWeights, confidence)
@@ -106,80 +113,98 @@ class PoseRefiner(RefinerBase):
             raise ValueError("PoseRefiner: no flows given; pass flows (a .flo folder, flows.npz or 'gt') or set loss_weights.opt 0")
         layout = get_layout(scene.joints3d_layout)
         self.layout_name = layout.name
+        people = refined_people(scene, self.hparams.people)
+        self.track_ids = [p.track_id for p in people]
+        self.unrefined = unrefined_people(scene, people, ("joints3d", "cameras"))
         self.register_buffer("bones", bone_matrix(layout.length_bones, layout.num_joints), persistent=False)
-        self.camera = CameraModel(scene.cameras)
-        joints_m = scene.joints3d.detach().float() / 1000.0
+        self.camera = CameraModel([p.cameras for p in people])
+        joints_m = torch.stack([p.joints3d.detach().float() / 1000.0 for p in people], 1)  # (T, P, J, 3)
         self.joints = nn.Parameter(joints_m.clone())
-        self.camera_vars = nn.Parameter(self.camera.initial())
+        self.camera_vars = nn.Parameter(self.camera.initial())  # (T, P, 3)
         self.register_buffer("initial_joints", joints_m, persistent=False)
         self.register_buffer("flows", flows, persistent=False)
         keypoints = weight = None
         if scene.keypoints2d is not None and w.keypoints2d != 0:
-            keypoints, weight = keypoints_for_layout(
-                scene, layout.name, self.hparams.keypoint_joints, self.hparams.confidence,
-                self.hparams.confidence_threshold,
-            )  # fmt: skip
+            keypoints, weight = self._keypoints(scene, len(people), layout.name)
         self.register_buffer("keypoints", keypoints, persistent=False)
         self.register_buffer("keypoint_weight", weight, persistent=False)
-        T, J = joints_m.shape[:2]
+        T, P, J = joints_m.shape[:3]
         self.objective = Objective([
-            Term("opt", (T - 1, J, 2), w.opt),
-            Term("3d", (T, J, 3), w.joints3d),
-            Term("2d", (T, J, 2), w.keypoints2d if keypoints is not None else 0.0, weight),
-            Term("pos", (T - 1, J, 3), w.pos),
-            Term("cam", (T - 1, 3), w.cam),
-            Term("bone", (T - 1, len(layout.length_bones)), w.bone),
-            Term("proj_smooth", (T - 1, J, 2), w.proj_smooth),
+            Term("opt", (T - 1, P * J, 2), w.opt),
+            Term("3d", (T, P * J, 3), w.joints3d),
+            Term("2d", (T, P * J, 2), w.keypoints2d if keypoints is not None else 0.0, weight),
+            Term("pos", (T - 1, P * J, 3), w.pos),
+            Term("cam", (T - 1, P * 3), w.cam),
+            Term("bone", (T - 1, P * len(layout.length_bones)), w.bone),
+            Term("proj_smooth", (T - 1, P * J, 2), w.proj_smooth),
         ])  # fmt: skip
-        gt = scene.gt
-        has_gt3d = gt is not None and gt.joints3d is not None and gt.joints_layout == layout.name
-        has_gt2d = gt is not None and gt.joints2d is not None and gt.joints_layout == layout.name
-        self.register_buffer("gt_joints3d", gt.joints3d.float() if has_gt3d else None, persistent=False)
-        self.register_buffer("gt_joints2d", gt.joints2d.float() if has_gt2d else None, persistent=False)
+        same_layout = scene.gt is not None and scene.gt.joints_layout == layout.name
+        truth = TruthIndex(scene, people, ["joints3d", "joints2d"] if same_layout else [])
+        self.gt_people = {name: truth.people.get(name, []) for name in ("joints3d", "joints2d")}
+        self.register_buffer("gt_joints3d", truth.values.get("joints3d"), persistent=False)
+        self.register_buffer("gt_joints2d", truth.values.get("joints2d"), persistent=False)
         self.pose_metrics = PoseMetrics(root=layout.root or (0,))
+
+    def _keypoints(self, scene: Scene, count: int, layout: str) -> tuple[torch.Tensor, torch.Tensor]:
+        """The first ``count`` people's keypoints in ``layout``, side by side: (T, P*J, 2) px
+        and their weights (T, P*J)."""
+        h = self.hparams
+        mapped = [keypoints_for_layout(scene.person(p), layout, h.keypoint_joints, h.confidence, h.confidence_threshold)
+                  for p in range(count)]  # fmt: skip
+        return torch.cat([m[0] for m in mapped], 1), torch.cat([m[1] for m in mapped], 1)
 
     # --- the loss -----------------------------------------------------------------------------
     def projected(self) -> torch.Tensor:
-        """The current joints projected by the current cameras, (T, J, 2) px."""
-        return self.camera.project(self.joints, self.camera_vars)
+        """The current joints projected by the current cameras, every person's side by side,
+        (T, P*J, 2) px."""
+        return side_by_side(self.camera.project(self.joints, self.camera_vars))
 
     def residuals(self) -> list[torch.Tensor]:
         """The active terms' residuals, in ``objective.names`` order (see the module doc)."""
-        X, k, names = self.joints, self.hparams.pixel_scale, self.objective.names
+        X, k, names = side_by_side(self.joints), self.hparams.pixel_scale, self.objective.names
         P = self.projected()
         out: dict[str, torch.Tensor] = {}
         if "opt" in names:
             out["opt"] = self.flow_term(P, k)
         if "3d" in names:
-            out["3d"] = X - self.initial_joints
+            out["3d"] = X - side_by_side(self.initial_joints)
         if "2d" in names:
             out["2d"] = P - self.keypoints if k == 1.0 else (P - self.keypoints) * k
         if "pos" in names:
             out["pos"] = temporal_residual(X)
         if "cam" in names:
-            out["cam"] = temporal_residual(self.camera_vars)
+            out["cam"] = temporal_residual(self.camera_vars).flatten(1)
         if "bone" in names:
-            out["bone"] = temporal_residual(bone_lengths(X, self.bones))
+            T, people, J = self.joints.shape[:3]
+            lengths = bone_lengths(self.joints.reshape(T * people, J, 3), self.bones)
+            out["bone"] = temporal_residual(lengths.reshape(T, -1))
         if "proj_smooth" in names:
             out["proj_smooth"] = temporal_residual(P) * k
         return [out[name] for name in names]
 
     # --- evaluation and results -----------------------------------------------------------------
     def joints_mm(self) -> torch.Tensor:
-        """The current joints (T, J, 3) in millimetres."""
+        """The current joints (T, P, J, 3) in millimetres."""
         return self.joints.detach() * 1000.0
 
     @torch.no_grad()
     def evaluate(self) -> dict[str, float]:
         """MPJPE, PA-MPJPE (mm), acceleration error (mm/frame^2) against the GT 3D joints, and
-        the projection's 2D error (px) against the GT 2D joints; {} without ground truth."""
-        out: dict[str, float] = {}
-        if self.gt_joints3d is not None:
-            out.update(self.pose_metrics.joints3d(self.joints_mm(), self.gt_joints3d))
-        if self.gt_joints2d is not None:
-            out.update(self.pose_metrics.points2d("proj2d_px", self.projected().detach(), self.gt_joints2d))
-        return out
+        the projection's 2D error (px) against the GT 2D joints; {} without ground truth. The
+        bare names are the main person's; with several people also pooled and per person."""
+        scored: dict[int, dict] = {}
+        joints = self.joints_mm()
+        for g, p in enumerate(self.gt_people["joints3d"]):
+            scored.setdefault(p, {}).update(self.pose_metrics.joints3d_metrics(joints[:, p], self.gt_joints3d[:, g]))
+        if self.gt_people["joints2d"]:
+            projected = self.camera.project(self.joints.detach(), self.camera_vars.detach())
+            for g, p in enumerate(self.gt_people["joints2d"]):
+                scored.setdefault(p, {}).update(
+                    self.pose_metrics.points2d_metrics("proj2d_px", projected[:, p], self.gt_joints2d[:, g]))
+        return people_metrics(self.track_ids, scored)
 
     def make_result(self) -> PoseResult:
-        return self.result_with("3d", joints3d=self.joints_mm().float().cpu(), joints3d_layout=self.layout_name,
-                                cameras=self.camera.to_cameras(self.camera_vars))  # fmt: skip
+        joints = self.joints_mm().float().cpu()
+        refined = [Person(i, joints3d=joints[:, p].clone(), cameras=self.camera.to_cameras(self.camera_vars, p))
+                   for p, i in enumerate(self.track_ids)]  # fmt: skip
+        return self.result_with("3d", refined + self.unrefined, joints3d_layout=self.layout_name)

@@ -15,7 +15,7 @@ import torch
 
 from ...core.cameras import Cameras
 from ...core.joints import get_layout
-from ...core.people import Person, check_people
+from ...core.people import PERSON_FIELDS, Person, check_people
 from ...core.scene import Scene, SceneValidationError, check_estimates
 from ._common import scale_factors, scale_points
 
@@ -137,7 +137,9 @@ class PoseEstimates:
         and ``frame_indices`` is the default 0..T-1. Pixels are rescaled when ``image_size``
         (if None: ``scene.metadata["native_size"]``, which :func:`~.video.read_video` records,
         else the scene's size) differs from the scene's. ``metadata["pose_estimates"]`` lists the
-        estimates applied so far (source, fields, frame_indices, metadata). Raises
+        estimates applied so far (source, fields, frame_indices, metadata). The people here
+        become the scene's people; another person whose track the scene has keeps that track's
+        fields that are absent here (refined 3D joints keep their 2D keypoints). Raises
         SceneValidationError on a mismatch, or for a found keypoint (confidence > 0) more than
         one image size outside the frame (x outside [-W, 2W], y outside [-H, 2H]).
         """
@@ -147,7 +149,7 @@ class PoseEstimates:
         est = est.rescaled((scene.height, scene.width))
         for person in est.people():
             _check_in_image(est, person, scene.height, scene.width)
-        fields: dict[str, Any] = {"track_id": est.track_id, "others": est.others}
+        fields: dict[str, Any] = {"track_id": est.track_id, "others": _merged_others(scene, est.others)}
         if est.keypoints2d is not None:
             fields |= {"keypoints2d": est.keypoints2d, "keypoints_conf": est.keypoints_conf,
                        "keypoints_layout": est.keypoints_layout}  # fmt: skip
@@ -173,6 +175,17 @@ class PoseEstimates:
             f"PoseEstimates ({self.source}): {len(mine)} rows for video frames {_span(mine)} do not cover the "
             f"scene {scene.name!r}'s {T} frames" + (f" (video frames {_span(wanted)})" if wanted is not None else "")
         )
+
+
+def _merged_others(scene: Scene, others: tuple[Person, ...]) -> tuple[Person, ...]:
+    """``others``, each completed by the fields it lacks from the scene's person of its track."""
+    by_id = {person.track_id: person for person in scene.people()}
+    merged = []
+    for person in others:
+        old = by_id.get(person.track_id)
+        missing = {} if old is None else {k: getattr(old, k) for k in PERSON_FIELDS if getattr(person, k) is None}
+        merged.append(dataclasses.replace(person, **missing))
+    return tuple(merged)
 
 
 def _check_in_image(est: PoseEstimates, person: Person, height: int, width: int) -> None:
