@@ -15,7 +15,12 @@ scene and flows already in memory; CPU time of this process in brackets):
 Early stopping is off so that every row runs exactly 1500 steps. The scene (synthetic walk, 300
 frames, GT flow) is rendered once and cached under --cache.
 
+With ``--people 1,2,4``: the shipped row for scenes of P people (the person and P-1 copies of its
+estimates, each moved 3 px right per copy; one refinement of every person at once), beside P
+single-person runs one after another.
+
 Usage: python benchmarks/pose_refiner_speed.py [--frames 300] [--steps 1500] [--repeats 3] [--compare]
+           [--people 1,2,4]
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from pathlib import Path
 
 import torch
 
+from lit_boot.core import Person
 from lit_boot.data import load_scene, save_scene
 from lit_boot.pose import PoseData, PoseRefiner, make_trainer
 from lit_boot.synth import make_scene
@@ -41,6 +47,25 @@ def scene_for(args):
     scene = make_scene(motion="walk", frames=args.frames, height=args.height, width=args.width, seed=0)
     save_scene(scene, folder, overwrite=True)
     return scene
+
+
+def crowd_of(scene, count: int):
+    """``scene`` with ``count`` - 1 more people: copies of its estimates moved right 3 px each."""
+    main = Person.of(scene)
+    others = [Person(p, joints3d=main.joints3d, cameras=main.cameras, keypoints2d=main.keypoints2d + torch.tensor([3.0 * p, 0.0]),
+                     keypoints_conf=main.keypoints_conf, person_boxes=main.person_boxes)
+              for p in range(1, count)]  # fmt: skip
+    return scene.with_people([main, *others])
+
+
+def people_rows(scene, args) -> None:
+    print("\n| people | every person at once: wall s (best of %d) | per person s | P single-person runs s |" % args.repeats)
+    print("| --- | --- | --- | --- |")
+    for count in [int(v) for v in args.people.split(",")]:
+        crowd = crowd_of(scene, count)
+        batched = min(timed(lambda: lightning_run(crowd, args.steps, 1))[0] for _ in range(args.repeats))
+        single = min(timed(lambda: lightning_run(scene, args.steps, 1))[0] for _ in range(args.repeats)) * count
+        print(f"| {count} | {batched:.2f} | {batched / count:.2f} | {single:.2f} |", flush=True)
 
 
 def timed(fn) -> tuple[float, float]:
@@ -107,6 +132,7 @@ def main() -> None:
     parser.add_argument("--compare", action="store_true", help="also time 1-step epochs")
     parser.add_argument("--epoch-steps", type=int, default=300)
     parser.add_argument("--cache", default="/tmp/pose_bench")
+    parser.add_argument("--people", default=None, help="e.g. 1,2,4: time scenes of that many people instead")
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
     logging.getLogger("lightning.pytorch").setLevel(logging.ERROR)
@@ -124,6 +150,9 @@ def main() -> None:
         rows[f"lightning, 1 step per epoch (x{scale:g} from {args.epoch_steps} epochs)"] = (
             lambda: epochs_run(scene, args.epoch_steps), scale)  # fmt: skip
     lightning_run(scene, 20, 1)  # warm-up (imports, first allocations)
+    if args.people:
+        people_rows(scene, args)
+        return
     print("\n| variant | wall s (best / median of %d) | CPU s (best) | per step ms |" % args.repeats)
     print("| --- | --- | --- | --- |")
     for name, entry in rows.items():

@@ -13,6 +13,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..metrics import base_metric_name
+
 __all__ = ["NOT_METRICS", "NEUTRAL_METRICS", "METRIC_LEGEND", "unit", "metric_value", "metric_meaning",
            "before_after", "stage_series", "change_text", "verdict"]
 
@@ -46,7 +48,8 @@ METRIC_LEGEND = (
 
 def unit(metric: str) -> str:
     """Unit from the name: ``*_px`` px, ``*_mm`` mm, ``*_mm_per_frame2`` mm/frame², ``epe*`` px,
-    ``*_error`` "of 48" (a census error)."""
+    ``*_error`` "of 48" (a census error); a pooled or per-person name as its metric's."""
+    metric = base_metric_name(metric)
     for suffix, name in _UNITS:
         if metric.endswith(suffix):
             return name
@@ -62,6 +65,7 @@ def metric_value(value: object) -> float | None:
 
 def metric_meaning(metric: str) -> str:
     """The :data:`METRIC_LEGEND` line of ``metric``'s family ("" if unknown)."""
+    metric = base_metric_name(metric)
     return next((text for names, text in METRIC_LEGEND if metric in names), "")
 
 

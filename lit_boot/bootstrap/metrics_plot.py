@@ -5,7 +5,8 @@ One panel per metric. Its title gives the change from before to after (the table
 the unit and which direction is better. The y axis spans at least :data:`MIN_RELATIVE_SPAN` of the
 metric's size and :data:`MIN_SPAN` of its unit (:func:`y_limits`), so a change far below a
 meaningful size is drawn small instead of as a steep climb. A stage without a value leaves a gap:
-no line is drawn across it. Rendered with Matplotlib's Agg canvas (pyplot is untouched).
+no line is drawn across it. With several people, the pooled and per-person values of a metric
+(``kp2d_px_all``, ``epe_person_person2``) are dashed lines in its panel. Rendered with Matplotlib's Agg canvas (pyplot is untouched).
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..data.atomic import atomic_write_bytes
+from ..metrics import base_metric_name
+from ..metrics.suite import PERSON_SUFFIX, POOLED_SUFFIX
 from .metric_history import NEUTRAL_METRICS, NOT_METRICS, before_after, change_text, stage_series, unit, verdict
 
 __all__ = ["plot_history", "history_figure", "y_limits", "MIN_SPAN", "MIN_RELATIVE_SPAN"]
@@ -60,6 +63,22 @@ def _title(metric: str, history: Sequence[dict]) -> tuple[str, str]:
     return title, _COLOURS.get(word, "black")
 
 
+def _panels(series: dict[str, list[float]]) -> tuple[dict[str, list[float]], dict[str, list[tuple[str, list]]]]:
+    """The panels' series (one per metric) and, per panel, the pooled and per-person series of
+    a scene with several people (drawn in their metric's panel, labelled "all" or "person <id>")."""
+    panels: dict[str, list[float]] = {}
+    people: dict[str, list[tuple[str, list]]] = {}
+    for name, ys in series.items():
+        base = base_metric_name(name)
+        if base == name:
+            panels[name] = ys
+            continue
+        panels.setdefault(base, [math.nan] * len(ys))
+        label = "all people" if name.endswith(POOLED_SUFFIX) else "person " + name.rsplit(PERSON_SUFFIX, 1)[1]
+        people.setdefault(base, []).append((label, ys))
+    return panels, people
+
+
 def history_figure(history: Sequence[dict], title: str = "Metrics per stage") -> Figure:
     """The figure of :func:`plot_history` (see there)."""
     if not history:
@@ -69,7 +88,7 @@ def history_figure(history: Sequence[dict], title: str = "Metrics per stage") ->
         if not isinstance(record, dict) or "stage" not in record:
             raise ValueError(f"plot_history: history[{i}] is not a dict with a 'stage' key: {record!r}")
         stages.append(str(record["stage"]) + ("\n(rolled back)" if record.get("rolled_back") else ""))
-    series = stage_series(history)
+    series, people = _panels(stage_series(history))
     if not series:
         raise ValueError(f"plot_history: no metrics in the history (no numeric values besides {NOT_METRICS})")
     cols = min(3, len(series))
@@ -82,12 +101,16 @@ def history_figure(history: Sequence[dict], title: str = "Metrics per stage") ->
     tilt = len(stages) > 3
     for n, (name, ys) in enumerate(series.items()):
         ax = fig.add_subplot(rows, cols, n + 1)
-        ax.plot(range(len(stages)), ys, marker="o", linestyle="-")  # NaN: a gap, no line across it
+        ax.plot(range(len(stages)), ys, marker="o", linestyle="-", label="main person" if people.get(name) else None)
+        for label, values in people.get(name, []):  # NaN: a gap, no line across it
+            ax.plot(range(len(stages)), values, marker=".", linestyle="--", linewidth=1, label=label)
+        if people.get(name):
+            ax.legend(fontsize=7)
         text, colour = _title(name, history)
         ax.set_title(text, color=colour, fontsize=10)
         direction = "a diagnostic" if name in NEUTRAL_METRICS else "lower is better"
         ax.set_ylabel(f"{unit(name)} · {direction}" if unit(name) else direction, fontsize=9)
-        ax.set_ylim(*y_limits(ys, unit(name)))
+        ax.set_ylim(*y_limits([*ys, *(v for _, values in people.get(name, []) for v in values)], unit(name)))
         ax.set_xticks(range(len(stages)), stages, rotation=30 if tilt else 0, ha="right" if tilt else "center")
         ax.set_xlim(-0.5, len(stages) - 0.5)
         ax.grid(True, alpha=0.3)

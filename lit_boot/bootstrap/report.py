@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from ..data.atomic import atomic_file
+from ..metrics import base_metric_name
 from .metric_history import (METRIC_LEGEND, NEUTRAL_METRICS, before_after, change_text, metric_meaning, unit,
                              verdict)  # fmt: skip
 from .metrics_plot import plot_history
@@ -49,6 +50,12 @@ def metric_rows(history: Sequence[dict]) -> list[dict]:
     return rows
 
 
+#: The legend line of a scene with several people's metric names.
+PEOPLE_LEGEND = ("- several people: `<metric>_person<id>` is track <id>'s own (the flow: on that person's "
+                 "visible pixels and joints), `<metric>_all` pools every person; the flow's epe_person is every "
+                 "person's pixels, the bare pose metrics are the main person's")
+
+
 def metrics_table(history: Sequence[dict]) -> str:
     """Markdown: every metric's unit, value before (the initial stage) and after (its last
     stage), and change, marked ``better`` or ``**worse**`` (lower is better but for
@@ -62,6 +69,8 @@ def metrics_table(history: Sequence[dict]) -> str:
              + (f"worse: {', '.join(worse)}." if worse else "none got worse.")]  # fmt: skip
     rows += [f"- {' / '.join(k for k in names if k in values)}: {text}"
              for names, text in METRIC_LEGEND if any(k in values for k in names)]  # fmt: skip
+    if any(base_metric_name(k) != k for k in values):
+        rows.append(PEOPLE_LEGEND)
     return "\n".join(rows)
 
 

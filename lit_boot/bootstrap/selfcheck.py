@@ -255,7 +255,7 @@ def check_stage(
     from ..metrics import scene_flow_metrics
 
     flows, record, weight = self_check(scene.frames, initial, tuned, person, config=config.self_check)
-    return flows, {**record, "tuned_metrics": scene_flow_metrics(scene.gt, tuned)}, weight
+    return flows, {**record, "tuned_metrics": scene_flow_metrics(scene.gt, tuned, scene.track_id)}, weight
 
 
 def summary_line(record: dict) -> str:

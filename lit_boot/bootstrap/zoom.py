@@ -126,7 +126,7 @@ def zoom_stage(raft: RAFT, scene: Scene, initial: Tensor, *, mode: str, config: 
         flows, kept, zoom, person = _zoom_people(raft, scene, initial, mode, config)
     finally:
         raft.to(original)
-    record = {**scene_flow_metrics(scene.gt, flows), "drift_px": drift(flows, initial, person),
+    record = {**scene_flow_metrics(scene.gt, flows, scene.track_id), "drift_px": drift(flows, initial, person),
               "agreement_px": agreement(flows, *scene.pose_points(mode)),
               "photo_error": photo_error(scene.frames, flows), "info": {"zoom": zoom}}  # fmt: skip
     return record, flows, {"painted": torch.zeros_like(kept), "kept": kept.float()}

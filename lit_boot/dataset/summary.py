@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..data.atomic import atomic_write_bytes
-from ..metrics import METRIC_NAMES, compute_metric_states, merge_metric_states
+from ..metrics import METRIC_NAMES, compute_metric_states, merge_metric_states, metric_person
 
 __all__ = ["dataset_metrics", "summary_records", "summary_rows", "summary_markdown", "summary_csv", "write_summary"]
 
@@ -74,7 +74,9 @@ def _metric_columns(values: dict[str, dict[str, float]], names: Sequence[str]) -
 
 
 def _ordered(names: set[str]) -> list[str]:
-    """Metric names in reporting order (unknown ones last, sorted)."""
+    """Metric names in reporting order (unknown ones last, sorted), without the per-person ones
+    (``..._person<id>``: a track id names a person of one scene only; the pooled ``_all`` stay)."""
+    names = {n for n in names if metric_person(n) is None}
     return [n for n in METRIC_NAMES if n in names] + sorted(names - set(METRIC_NAMES))
 
 

@@ -50,7 +50,7 @@ def _states(metric: Metric) -> dict[str, float]:
 def scene_metric_states(scene: Scene, flows: Tensor, mode: str) -> States:
     """The states of the metrics ``scene_flow_metrics(scene.gt, flows)`` and
     ``scene_pose_metrics(scene, mode)`` report; flows: (T-1, 2, H, W) px. {} without GT."""
-    metrics = {**scene_flow_metric_objects(scene.gt, flows), **scene_pose_metric_objects(scene, mode)}
+    metrics = {**scene_flow_metric_objects(scene.gt, flows, scene.track_id), **scene_pose_metric_objects(scene, mode)}
     return {name: _states(metric) for name, metric in metrics.items()}
 
 

@@ -12,8 +12,10 @@ records, summary.json, :class:`~lit_boot.pose.PoseResult`):
   projected joints against the GT 2D joints), ``kp2d_px`` (2D mode: the keypoints against the
   GT keypoints).
 
-With several people the bare names are the main person's, ``<name>_all`` pools every person
-with ground truth, ``<name>_person<track id>`` is one other person's (:func:`people_metric_objects`).
+With several people the bare pose names are the main person's, ``<name>_all`` pools every person
+with ground truth, ``<name>_person<track id>`` is one other person's (:func:`people_metric_objects`);
+the flow's ``epe_person`` is every person's pixels (pooled by nature), and each person's own are
+``epe_person_person<track id>`` and ``epe_joints_person<track id>`` (:func:`scene_flow_metrics`).
 
 Lightning modules log them as ``val/<name>``; the orchestrator's records and the pose results
 hold the bare names. EPE-like means pool every selected pixel (or joint) of every pair.
@@ -43,6 +45,7 @@ __all__ = [
     "scene_pose_metric_objects",
     "people_metric_objects",
     "base_metric_name",
+    "metric_person",
     "POOLED_SUFFIX",
     "PERSON_SUFFIX",
 ]
@@ -51,6 +54,9 @@ __all__ = [
 #: person, ``kp2d_px_person3`` is track 3's; the bare name is the main person's.
 POOLED_SUFFIX = "_all"
 PERSON_SUFFIX = "_person"
+#: The flow metrics reported for each person of a scene with several (the others are whole-frame).
+FLOW_PEOPLE_METRICS = ("epe_person", "epe_joints")
+_PERSON_NAME = re.compile(rf".+?{PERSON_SUFFIX}(\d+)")
 _PEOPLE_NAME = re.compile(rf"(.+?)(?:{POOLED_SUFFIX}|{PERSON_SUFFIX}\d+)")
 
 
@@ -147,23 +153,39 @@ class PoseMetrics(torch.nn.Module):
         return _values(self.points2d_metrics(name, pred, gt))
 
 
-@torch.no_grad()
-def scene_flow_metric_objects(gt: GroundTruth | None, flows: Tensor) -> dict[str, Metric]:
-    """The updated metrics behind :func:`scene_flow_metrics`, by name; {} without GT."""
-    if gt is None:
-        return {}
+def _flow_metric_objects(gt: GroundTruth, flows: Tensor, person: Tensor | None, joints: Tensor | None) -> dict[str, Metric]:
+    """The updated :class:`FlowMetrics` of ``flows`` with ``person`` (T, H, W) bool as the person
+    mask and ``joints`` (T, J, 2) px as the GT joints (either may be None)."""
     metrics = FlowMetrics()
-    joints = gt.joints2d.float() if gt.joints2d is not None else None
+    joints = joints.float() if joints is not None else None
     metrics.update(flows.float(), gt.flow.float() if gt.flow is not None else None, gt.flow_mask(),
-                   gt.person_mask[:-1] if gt.person_mask is not None else None,
+                   person[:-1] if person is not None else None,
                    joints[:-1] if joints is not None else None, joints[1:] if joints is not None else None)  # fmt: skip
     return metrics.updated()
 
 
-def scene_flow_metrics(gt: GroundTruth | None, flows: Tensor) -> dict[str, float]:
+@torch.no_grad()
+def scene_flow_metric_objects(gt: GroundTruth | None, flows: Tensor, track_id: int = 0) -> dict[str, Metric]:
+    """The updated metrics behind :func:`scene_flow_metrics`, by name; {} without GT."""
+    if gt is None:
+        return {}
+    out = _flow_metric_objects(gt, flows, gt.person_mask, gt.joints2d)
+    if not gt.others:
+        return out
+    ids = [int(track_id), *(o.track_id for o in gt.others)]
+    for person_id, truth in zip(ids, gt.truths(ids)):
+        own = _flow_metric_objects(gt, flows, truth.person_mask, truth.joints2d)
+        out.update({f"{name}{PERSON_SUFFIX}{person_id}": own[name] for name in FLOW_PEOPLE_METRICS if name in own})
+    return out
+
+
+def scene_flow_metrics(gt: GroundTruth | None, flows: Tensor, track_id: int = 0) -> dict[str, float]:
     """The flow metrics of ``flows`` (T-1, 2, H, W) px against a scene's ground truth (the GT
-    flow's, and ``epe_joints`` with GT 2D joints); {} without either."""
-    return _values(scene_flow_metric_objects(gt, flows))
+    flow's, and ``epe_joints`` with GT 2D joints); {} without either. With other people in the
+    GT, ``epe_person`` stays every person's pixels and ``epe_joints`` the main person's joints,
+    and each person's own are added as ``epe_person_person<id>`` / ``epe_joints_person<id>`` (the
+    main person's under ``track_id``)."""
+    return _values(scene_flow_metric_objects(gt, flows, track_id))
 
 
 def _person_pose_metric_objects(scene: Scene, person: Person, truth: PersonTruth, mode: str) -> dict[str, Metric]:
@@ -204,6 +226,12 @@ def base_metric_name(name: str) -> str:
     """The metric a (pooled or per-person) name reports: ``kp2d_px_person3`` -> ``kp2d_px``."""
     match = _PEOPLE_NAME.fullmatch(name)
     return match.group(1) if match else name
+
+
+def metric_person(name: str) -> int | None:
+    """The track id of a per-person metric name (``kp2d_px_person3`` -> 3), else None."""
+    match = _PERSON_NAME.fullmatch(name)
+    return int(match.group(1)) if match else None
 
 
 @torch.no_grad()
