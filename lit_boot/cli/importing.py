@@ -102,7 +102,9 @@ def import_parser(kinds: Iterable[str] | None = None) -> ArgumentParser:
                               "an .onnx path) for the person's box in every frame, where the method zooms")  # fmt: skip
         sub.add_argument("--people", type=str | None, default=None,
                          help="with --estimate: all, largest or a number N: a pose for every person the detector "
-                              "tracks (top-down; --detector defaults to yolox_nano); unset: one person")  # fmt: skip
+                              "tracks (top-down; --detector defaults to yolox_nano); with --poses (COCO keypoints, "
+                              "DCPose): every person of the file, linked by its track ids or the tracker; unset: one "
+                              "person")  # fmt: skip
         sub.add_argument("--out", type=Path, required=True, help="scene folder to write")
         sub.add_argument("--overwrite", type=bool, default=False, help="replace an existing scene folder")
         subcommands.add_subcommand(kind, sub, help=describe(kind))
@@ -122,12 +124,10 @@ def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None =
         raise ValueError("--poses and --estimate: give one of them, not both")
     if detector is not None and not estimate:
         raise ValueError("--detector: needs --estimate true (it adds the person's boxes to the estimated poses)")
-    if people is not None and not estimate:
-        raise ValueError("--people: needs --estimate true (it estimates every person's pose)")
+    if people is not None and not estimate and poses is None:
+        raise ValueError("--people: needs --estimate true or --poses (every person's pose comes from one of them)")
     if poses is not None:
-        from ..data.readers import read_estimates
-
-        return read_estimates(poses).apply_to(scene)
+        return read_pose_file(poses, people).apply_to(scene)
     if estimate:
         from ..estimate import estimate_poses, require_person
 
@@ -135,6 +135,18 @@ def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None =
             est = estimate_poses(scene.frames, detector=detector, people=people)
         return require_person(est, f"scene {scene.name!r}").apply_to(scene)  # nobody: no pose to bootstrap
     return scene
+
+
+def read_pose_file(poses: Path, people: str | None):
+    """The estimates of the file ``poses``: with ``people``, every person of a COCO keypoint or
+    DCPose file (:func:`~lit_boot.estimate.read_tracked_estimates`), else one."""
+    if people is None:
+        from ..data.readers import read_estimates
+
+        return read_estimates(poses)
+    from ..estimate import read_tracked_estimates
+
+    return read_tracked_estimates(poses, people=people)
 
 
 def import_scene(argv: list[str]) -> int:
@@ -157,8 +169,10 @@ def import_scene(argv: list[str]) -> int:
     if args.kind == "video" and not estimate:  # read_video selects and checks the pose rows itself
         if detector is not None:
             raise CliError("--detector: needs --estimate true (it adds the person's boxes to the estimated poses)")
-        if people is not None:
-            raise CliError("--people: needs --estimate true (it estimates every person's pose)")
+        if people is not None and poses is None:
+            raise CliError("--people: needs --estimate true or --poses (every person's pose comes from one of them)")
+        if people is not None:  # every person of the file; else read_video reads it (its errors name the file)
+            poses = read_pose_file(poses, people)
         scene = _reader("video")(**options, poses=poses)
     else:
         scene = with_poses(_reader(args.kind)(**options), poses, estimate, detector, people)

@@ -12,6 +12,8 @@ detector is built); ``main_person_boxes(detections)`` follows one person over th
 to the estimates: the region the method zooms on). ``track_people(detections)`` follows every
 person (ids kept through crossings), and ``estimate_poses(..., people="all")`` gives each tracked
 person a pose, top-down (the main person first, the others in ``PoseEstimates.others``).
+``read_tracked_estimates(path)`` reads every person of an external COCO keypoint or DCPose file,
+linked into tracks by the file's track ids or by the same tracker.
 """
 
 from .detector import (
@@ -40,6 +42,7 @@ from .mediapipe_pose import (
     run_mediapipe,
     summary_line,
 )
+from .keypoint_tracks import link_keypoint_people, read_tracked_estimates
 from .people_pose import estimate_people, pose_in_box
 from .people_track import PEOPLE_CHOICES, parse_people, select_people, track_people
 from .person_track import main_person_boxes, person_boxes
@@ -55,6 +58,8 @@ from .world_to_lsp import (
 )
 
 __all__ = [
+    "link_keypoint_people",
+    "read_tracked_estimates",
     "INSTALL_HINT",
     "MEDIAPIPE_VERSION",
     "MediaPipeUnavailable",

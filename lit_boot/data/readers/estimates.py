@@ -18,8 +18,10 @@
 
 Several people in a frame: ``person`` = "track" (default: the largest first, then the one whose
 keypoint box centre is nearest the previous choice), "largest" (largest keypoint box) or
-"score" (highest detection score, else mean keypoint confidence). Frames with nobody are
-kept as zero rows with confidence 0. 2D keypoints are COCO-17 px; frame_indices are 0..T-1.
+"score" (highest detection score, else mean keypoint confidence) read one person; "all" reads
+every person, linked into tracks by the file's ``track_id`` or by ``link``
+(:mod:`.frame_people`; :func:`lit_boot.estimate.read_tracked_estimates` passes the person
+tracker). Frames with nobody are kept as zero rows with confidence 0. 2D keypoints are COCO-17 px; frame_indices are 0..T-1.
 """
 
 from __future__ import annotations
@@ -39,16 +41,17 @@ import torch
 from ...core.cameras import Cameras
 from ...core.joints import map_joints
 from ._common import DatasetFormatError, check_shape
+from .frame_people import Link, clean_keypoints, every_person, keypoint_box, track_labels
 from .pose_file import POSES_FORMAT, PoseEstimates, load_poses
 
 __all__ = [
     "ESTIMATE_KINDS", "PERSON_RULES", "list_files", "natural_key", "pick_people",
-    "read_metro", "read_dcpose", "read_coco_keypoints", "read_estimates",
+    "read_metro", "read_dcpose", "read_coco_keypoints", "read_estimates", "detect_kind",
 ]  # fmt: skip
 
 ESTIMATE_KINDS = ("poses", "metro", "dcpose", "coco")
-PERSON_RULES = ("track", "largest", "score")
-PersonRule = Literal["track", "largest", "score"]
+PERSON_RULES = ("track", "largest", "score", "all")
+PersonRule = Literal["track", "largest", "score", "all"]
 _METRO_SUFFIXES = (".npz", ".pkl", ".pickle")
 _METRO_JOINTS = ("pred_3d_joints_from_smpl", "pred_3d_joints")
 _METRO_CAMERA = ("pred_camera", "pred_cam")
@@ -68,18 +71,17 @@ def natural_key(name: str) -> list[Any]:
 
 def _person_box(p: np.ndarray) -> tuple[float, np.ndarray]:
     """(area, centre) of the box around a (K, 3) person's keypoints with confidence > 0."""
-    pts = p[p[:, 2] > 0, :2]
-    if len(pts) == 0:
+    box = keypoint_box(p)
+    if box is None:
         return 0.0, np.zeros(2)
-    lo, hi = pts.min(0), pts.max(0)
-    return float(np.prod(hi - lo)), (lo + hi) / 2
+    return float(np.prod(box[2:] - box[:2])), (box[:2] + box[2:]) / 2
 
 
 def pick_people(people: list[list[np.ndarray]], rule: PersonRule, scores: list[list[float]] | None = None):
     """One person per frame: people[t] = (K, 3) [x, y, confidence] arrays. Returns
     keypoints (T, K, 2), confidence (T, K) float32 tensors and the chosen index per frame (-1: nobody)."""
-    if rule not in PERSON_RULES:
-        raise ValueError(f"person: expected one of {PERSON_RULES}, got {rule!r}")
+    if rule not in PERSON_RULES or rule == "all":
+        raise ValueError(f"person: expected one of {PERSON_RULES[:-1]}, got {rule!r}")
     K = next((len(p) for frame in people for p in frame), 17)
     out, chosen, last = np.zeros((len(people), K, 3), np.float32), [], None
     for t, frame in enumerate(people):
@@ -98,11 +100,8 @@ def pick_people(people: list[list[np.ndarray]], rule: PersonRule, scores: list[l
         out[t] = frame[i]
         if boxes[i][0] > 0:
             last = boxes[i][1]
-    conf = np.clip(np.nan_to_num(out[..., 2]), 0.0, 1.0)
-    bad = ~np.isfinite(out[..., :2]).all(-1)
-    conf[bad] = 0.0
-    xy = np.where(bad[..., None], 0.0, out[..., :2])
-    return torch.from_numpy(xy.astype(np.float32)), torch.from_numpy(conf.astype(np.float32)), chosen
+    keypoints, conf = clean_keypoints(out)
+    return keypoints, conf, chosen
 
 
 def _numbers(value: Any, file: Path, what: str) -> np.ndarray:
@@ -128,7 +127,22 @@ def _load_json(path: Path) -> Any:
         raise DatasetFormatError(f"{path}: not valid JSON: {err}") from None
 
 
-def _estimates_2d(people, person, scores, source, image_size, metadata) -> PoseEstimates:
+def _estimates_2d(people, person, scores, source, image_size, metadata, *, path: Path, track_ids=None,
+                  link: Link | None = None) -> PoseEstimates:  # fmt: skip
+    """The PoseEstimates of ``people`` (per frame, (K, 3) arrays) under the ``person`` rule; "all"
+    links them by ``track_ids`` (the file's, per detection) or else by ``link``."""
+    if person == "all":
+        labels, by = (track_labels(track_ids) if track_ids is not None else None), "track_id"
+        if labels is None:
+            if link is None:
+                raise DatasetFormatError(
+                    f"{path}: person 'all': not every detection has a track_id; read it with "
+                    "lit_boot.estimate.read_tracked_estimates (links each frame's people with the person tracker) "
+                    "or `lit-boot import ... --poses FILE --people all`"
+                )
+            labels, by = link(people, scores), "tracker"
+        return every_person(people, labels, source=source, image_size=image_size,
+                            metadata={**metadata, "linked_by": by})  # fmt: skip
     keypoints, conf, chosen = pick_people(people, person, scores)
     meta = {**metadata, "person_rule": person, "chosen_person": chosen}
     return PoseEstimates(keypoints2d=keypoints, keypoints_conf=conf, keypoints_layout="coco17",
@@ -146,29 +160,32 @@ def _dcpose_entries(data: Any, file: Path) -> list[dict[str, Any]]:
 
 
 def read_dcpose(
-    path: str | os.PathLike, *, person: PersonRule = "track", image_size: tuple[int, int] | None = None
+    path: str | os.PathLike, *, person: PersonRule = "track", image_size: tuple[int, int] | None = None,
+    link: Link | None = None,
 ) -> PoseEstimates:
-    """DCPose keypoints (a JSON file or a folder of per-frame JSON files; module docstring)."""
+    """DCPose keypoints (a JSON file or a folder of per-frame JSON files; module docstring);
+    ``link``: with ``person="all"`` and no track ids in the file (:mod:`.frame_people`)."""
     path = Path(path)
     if path.is_dir():
         files = list_files(path, (".json",))
         if not files:
             raise DatasetFormatError(f"{path}: no .json files (expected one DCPose result per frame)")
-        people = [[_person(e["keypoints"], f, f"Info[{i}].keypoints") for i, e in
-                   enumerate(_dcpose_entries(_load_json(f), f))] for f in files]  # fmt: skip
+        frames = [[(f, i, e) for i, e in enumerate(_dcpose_entries(_load_json(f), f))] for f in files]
         names = [f.name for f in files]
     else:
-        entries = _dcpose_entries(_load_json(path), path)
-        if all("image_path" in e for e in entries):
-            names = sorted({str(e["image_path"]) for e in entries}, key=natural_key)
+        entries = [(path, i, e) for i, e in enumerate(_dcpose_entries(_load_json(path), path))]
+        if all("image_path" in e for _, _, e in entries):
+            names = sorted({str(e["image_path"]) for _, _, e in entries}, key=natural_key)
             where = {n: t for t, n in enumerate(names)}
-            people = [[] for _ in names]
-            for i, e in enumerate(entries):
-                people[where[str(e["image_path"])]].append(_person(e["keypoints"], path, f"Info[{i}].keypoints"))
+            frames = [[] for _ in names]
+            for entry in entries:
+                frames[where[str(entry[2]["image_path"])]].append(entry)
         else:
-            names = None
-            people = [[_person(e["keypoints"], path, f"Info[{i}].keypoints")] for i, e in enumerate(entries)]
-    return _estimates_2d(people, person, None, "dcpose", image_size, {"frames": names})
+            names, frames = None, [[entry] for entry in entries]
+    people = [[_person(e["keypoints"], f, f"Info[{i}].keypoints") for f, i, e in frame] for frame in frames]
+    track_ids = [[e.get("track_id") for _, _, e in frame] for frame in frames]
+    return _estimates_2d(people, person, None, "dcpose", image_size, {"frames": names}, path=path,
+                         track_ids=track_ids, link=link)  # fmt: skip
 
 
 # --- COCO keypoints ------------------------------------------------------------------------------
@@ -179,9 +196,11 @@ def read_coco_keypoints(
     person: PersonRule = "track",
     image_size: tuple[int, int] | None = None,
     category_id: int = 1,
+    link: Link | None = None,
 ) -> PoseEstimates:
     """COCO keypoint JSON, results or annotations format (module docstring). ``image_ids``: the
-    frames' image ids in video order (images without a detection become zero rows)."""
+    frames' image ids in video order (images without a detection become zero rows); ``link``:
+    with ``person="all"`` and no track ids in the file (:mod:`.frame_people`)."""
     path = Path(path)
     data = _load_json(path)
     if isinstance(data, dict) and {"images", "annotations"} <= set(data):
@@ -207,6 +226,7 @@ def read_coco_keypoints(
     where = {i: t for t, i in enumerate(image_ids)}
     people = [[] for _ in image_ids]
     scores = [[] for _ in image_ids]
+    track_ids = [[] for _ in image_ids]
     for n, d in enumerate(dets):
         if d.get("image_id") not in where or d.get("category_id", category_id) != category_id or d.get("iscrowd"):
             continue
@@ -215,8 +235,9 @@ def read_coco_keypoints(
             p[:, 2] = p[:, 2] > 0
         people[where[d["image_id"]]].append(p)
         scores[where[d["image_id"]]].append(float(d.get("score", p[:, 2].mean())))
+        track_ids[where[d["image_id"]]].append(d.get("track_id"))
     meta = {"format": "annotations" if annotations else "results", "image_ids": list(image_ids)}
-    return _estimates_2d(people, person, scores, "coco", image_size, meta)
+    return _estimates_2d(people, person, scores, "coco", image_size, meta, path=path, track_ids=track_ids, link=link)
 
 
 # --- METRO ---------------------------------------------------------------------------------------
@@ -303,7 +324,10 @@ def read_metro(path: str | os.PathLike, *, image_size: tuple[int, int] | None = 
 
 
 # --- dispatcher ----------------------------------------------------------------------------------
-def _detect(path: Path) -> str:
+def detect_kind(path: str | os.PathLike) -> str:
+    """The kind of pose estimates at ``path`` (one of :data:`ESTIMATE_KINDS`) from its suffix and
+    content, "?" if none; may raise OSError / ValueError for an unreadable file."""
+    path = Path(path)
     if path.is_dir():
         files = list_files(path, (".json",) + _METRO_SUFFIXES)
         return "dcpose" if files and files[0].suffix.lower() == ".json" else "metro" if files else "?"
@@ -334,7 +358,7 @@ def read_estimates(path: str | os.PathLike, *, kind: str | None = None, **option
     readers = {"poses": load_poses, "metro": read_metro, "dcpose": read_dcpose, "coco": read_coco_keypoints}
     if kind is None:
         try:
-            kind = _detect(path)
+            kind = detect_kind(path)
         except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
             raise DatasetFormatError(f"{path}: unreadable pose file: {err}") from None
         if kind == "?":
