@@ -197,3 +197,20 @@ def test_images_inconsistent_with_annotations(pw3d: tuple[Path, dict]) -> None:
     message = r"downtown_walk_00: holds 3 image_\*.jpg files, but .*downtown_walk_00.pkl annotates 4"
     with pytest.raises(DatasetFormatError, match=message):
         read_3dpw(root, "downtown_walk_00")
+
+
+def test_every_person_of_a_sequence(tmp_path):
+    _write_sequence(tmp_path, campose_valid=[np.array([1, 1, 0, 1]), np.array([0, 1, 1, 1])])
+    scene = read_3dpw(tmp_path, "downtown_walk_00", person="all")
+    assert scene.metadata["frames"] == [1, 3]  # frames valid for every person
+    assert scene.num_people == 2 and scene.track_id == 0 and scene.others[0].track_id == 1
+    assert [o.track_id for o in scene.gt.others] == [1]
+    second = read_3dpw(tmp_path, "downtown_walk_00", person=1, first=1)  # frames 1, 2, 3 of person 1
+    rows = [0, 2]  # its frames 1 and 3
+    torch.testing.assert_close(scene.gt.others[0].joints3d, second.gt.joints3d[rows])
+    torch.testing.assert_close(scene.others[0].keypoints2d, second.keypoints2d[rows])
+    assert second.track_id == 1 and scene.name == "3dpw_downtown_walk_00"
+    first = read_3dpw(tmp_path, "downtown_walk_00", person=0, invalid="keep")
+    torch.testing.assert_close(scene.gt.joints3d, first.gt.joints3d[[1, 3]])
+    with pytest.raises(ValueError, match="person: expected a person index or 'all'"):
+        read_3dpw(tmp_path, "downtown_walk_00", person="everyone")

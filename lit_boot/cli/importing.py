@@ -43,7 +43,7 @@ ARG_HELP: dict[str, str] = {
     "scene": "Sintel scene name (e.g. alley_1)",
     "pass_name": "Sintel pass: final or clean",
     "sequence": "3DPW sequence name (e.g. downtown_walking_00)",
-    "person": "which person of the sequence (0-based)",
+    "person": "which person of the sequence (0-based), or all: every person (the others in the scene's others)",
     "split": "train, validation or test (default: search all three)",
     "invalid": "frames whose GT is not aligned to the image: drop them, keep them, or error",
     "subject": "Human3.6M subject (e.g. S9)",

@@ -1,4 +1,4 @@
-"""3DPW (3D Poses in the Wild): one person of one sequence with its ground-truth joints.
+"""3DPW (3D Poses in the Wild): one person (or every person) of one sequence with its ground-truth joints.
 
 Layout under ``root``::
 
@@ -29,7 +29,8 @@ import numpy as np
 import torch
 
 from ...core.joints import map_joints
-from ...core.scene import GroundTruth, Scene
+from ...core.people import Person
+from ...core.scene import GroundTruth, PersonTruth, Scene
 from ._common import DatasetFormatError, Size, check_shape, make_scene, pinhole_cameras, read_images, require_dir
 from ._common import scale_factors, scale_points, select_frames
 
@@ -87,32 +88,42 @@ def load_3dpw_pickle(path: str | os.PathLike) -> dict[str, Any]:
     return data
 
 
-def _person_arrays(data: dict[str, Any], person: int, path: Path) -> dict[str, np.ndarray]:
-    """The arrays used here, shape-checked: joints (T, 24, 3) m, cam_poses (T, 4, 4), K (3, 3),
-    valid (T,) bool, poses2d (T, 18, 3)."""
-    people = len(data["jointPositions"])
-    if not 0 <= person < people:
-        raise ValueError(f"{path}: person {person} out of range, the sequence has {people} people")
+def _people_arrays(data: dict[str, Any], people: list[int], path: Path) -> dict[str, Any]:
+    """The arrays used here, shape-checked: cam_poses (T, 4, 4), K (3, 3), and per person (lists
+    in ``people`` order) joints (T, 24, 3) m, valid (T,) bool, poses2d (T, 18, 3)."""
+    count = len(data["jointPositions"])
     for key in ("poses2d", "campose_valid"):
-        if len(data[key]) != people:
-            raise DatasetFormatError(f"{path}: {key} lists {len(data[key])} people, jointPositions {people}")
+        if len(data[key]) != count:
+            raise DatasetFormatError(f"{path}: {key} lists {len(data[key])} people, jointPositions {count}")
     poses = check_shape(data["cam_poses"], (None, 4, 4), path, "cam_poses")
     T = poses.shape[0]
-    joints = check_shape(data["jointPositions"][person], (T, 72), path, f"jointPositions[{person}]")
+    each = lambda key, p, shape: check_shape(data[key][p], shape, path, f"{key}[{p}]")  # noqa: E731
     return {
-        "joints": joints.reshape(T, 24, 3),
         "cam_poses": poses,
         "K": check_shape(data["cam_intrinsics"], (3, 3), path, "cam_intrinsics"),
-        "valid": check_shape(data["campose_valid"][person], (T,), path, f"campose_valid[{person}]").astype(bool),
-        "poses2d": check_shape(data["poses2d"][person], (T, 3, 18), path, f"poses2d[{person}]").transpose(0, 2, 1),
+        "joints": [each("jointPositions", p, (T, 72)).reshape(T, 24, 3) for p in people],
+        "valid": [each("campose_valid", p, (T,)).astype(bool) for p in people],
+        "poses2d": [each("poses2d", p, (T, 3, 18)).transpose(0, 2, 1) for p in people],
     }
+
+
+def _which_people(data: dict[str, Any], person: int | str, path: Path) -> list[int]:
+    """The people ``person`` asks for: [person], or every person ("all")."""
+    count = len(data["jointPositions"])
+    if person == "all":
+        return list(range(count))
+    if isinstance(person, bool) or not isinstance(person, int):
+        raise ValueError(f"person: expected a person index or 'all', got {person!r}")
+    if not 0 <= person < count:
+        raise ValueError(f"{path}: person {person} out of range, the sequence has {count} people")
+    return [person]
 
 
 def read_3dpw(
     root: str | os.PathLike,
     sequence: str,
     *,
-    person: int = 0,
+    person: int | str = 0,
     split: str | None = None,
     first: int | None = None,
     last: int | None = None,
@@ -122,15 +133,18 @@ def read_3dpw(
     invalid: InvalidFrames = "drop",
     joints_layout: str = "lsp14",
 ) -> Scene:
-    """Read one person of a 3DPW sequence as a :class:`Scene` (30 / stride fps).
+    """Read one person of a 3DPW sequence (``person="all"``: every person) as a :class:`Scene`
+    (30 / stride fps).
 
     Frames ``first``, ``first + stride``, ... ``last`` (inclusive, 0-based image numbers;
     default all), at most ``max_frames``. ``split`` None searches train, validation, test.
-    Frames whose ``campose_valid`` is 0 (GT not aligned to the image): ``invalid="drop"``
-    removes them (the standard evaluation; gaps show in ``metadata["frames"]``), ``"keep"``
-    keeps them with their unreliable GT (``metadata["campose_valid"]`` marks them),
-    ``"error"`` raises. ``size`` = (height, width) resizes frames, keypoints and cameras.
-    ``joints_layout``: "lsp14" (default) or "smpl" (the 24 SMPL joints).
+    Frames whose ``campose_valid`` is 0 (GT not aligned to the image; with every person: 0 for
+    anyone): ``invalid="drop"`` removes them (the standard evaluation; gaps show in
+    ``metadata["frames"]``), ``"keep"`` keeps them with their unreliable GT
+    (``metadata["campose_valid"]`` marks them), ``"error"`` raises. ``size`` = (height, width)
+    resizes frames, keypoints and cameras. ``joints_layout``: "lsp14" (default) or "smpl" (the 24
+    SMPL joints). With every person, person 0 is the main one and the others (track id = their
+    index in the sequence) are in ``Scene.others`` with their truth in ``GroundTruth.others``.
 
     Raises FileNotFoundError (missing folder, pickle or image), ValueError (bad arguments),
     :class:`DatasetFormatError` naming the file (missing keys, wrong shapes, image count
@@ -140,38 +154,46 @@ def read_3dpw(
         raise ValueError(f"invalid: expected 'drop', 'keep' or 'error', got {invalid!r}")
     root = require_dir(Path(root), "3DPW root")
     path = _find(root, sequence, split)
-    arrays = _person_arrays(load_3dpw_pickle(path), person, path)
+    data = load_3dpw_pickle(path)
+    people = _which_people(data, person, path)
+    arrays = _people_arrays(data, people, path)
     T = arrays["cam_poses"].shape[0]
     folder = require_dir(root / "imageFiles" / sequence, f"the images of 3DPW sequence {sequence}")
     count = len(list(folder.glob("image_*.jpg")))
     if count != T:
         raise DatasetFormatError(f"{folder}: holds {count} image_*.jpg files, but {path} annotates {T} frames")
+    valid = np.logical_and.reduce(arrays["valid"])
+    which = f"campose_valid[{person}]" if person != "all" else "campose_valid of some person"
     frames_idx = select_frames(range(T), first, last, stride, max_frames, where=str(path))
-    bad = [t for t in frames_idx if not arrays["valid"][t]]
+    bad = [t for t in frames_idx if not valid[t]]
     if bad and invalid == "error":
-        raise DatasetFormatError(f"{path}: campose_valid[{person}] is 0 at frames {bad[:5]}{' ...' * (len(bad) > 5)}")
+        raise DatasetFormatError(f"{path}: {which} is 0 at frames {bad[:5]}{' ...' * (len(bad) > 5)}")
     if invalid == "drop":
-        frames_idx = [t for t in frames_idx if arrays["valid"][t]]
+        frames_idx = [t for t in frames_idx if valid[t]]
         if not frames_idx:
-            raise DatasetFormatError(f"{path}: no frame with campose_valid[{person}] = 1 in the selected range")
+            raise DatasetFormatError(f"{path}: no frame with campose_valid = 1 for every person read in the selected range")
     idx = np.asarray(frames_idx)
     frames, native = read_images([folder / f"image_{t:05d}.jpg" for t in frames_idx], size)
     sx, sy = scale_factors(*native, size)
-
-    poses = arrays["cam_poses"][idx]
-    world = arrays["joints"][idx]
-    camera = np.einsum("tij,tkj->tki", poses[:, :3, :3], world) + poses[:, None, :3, 3]
-    joints3d, _, _ = map_joints(torch.from_numpy(camera * 1000.0).float(), "smpl", joints_layout)
     cameras = pinhole_cameras(arrays["K"], len(idx), sx, sy)
-    detected = torch.from_numpy(arrays["poses2d"][idx][:, OPENPOSE18_TO_COCO17]).float()
-    joints2d = cameras.project(joints3d)
-    gt = GroundTruth(joints3d=joints3d, joints2d=joints2d, joints_layout=joints_layout, cameras=cameras)
+    poses = arrays["cam_poses"][idx]
+    truths, estimates = [], []
+    for p, world, poses2d in zip(people, arrays["joints"], arrays["poses2d"]):
+        camera = np.einsum("tij,tkj->tki", poses[:, :3, :3], world[idx]) + poses[:, None, :3, 3]
+        joints3d, _, _ = map_joints(torch.from_numpy(camera * 1000.0).float(), "smpl", joints_layout)
+        detected = torch.from_numpy(poses2d[idx][:, OPENPOSE18_TO_COCO17]).float()
+        truths.append(PersonTruth(p, joints3d=joints3d, joints2d=cameras.project(joints3d)))
+        estimates.append(Person(p, keypoints2d=scale_points(detected[..., :2], sx, sy),
+                                keypoints_conf=detected[..., 2].clamp(0.0, 1.0)))  # fmt: skip
+    main = truths[0]
+    gt = GroundTruth(joints3d=main.joints3d, joints2d=main.joints2d, joints_layout=joints_layout, cameras=cameras,
+                     others=tuple(truths[1:]))  # fmt: skip
     metadata = {
         "dataset": "3dpw", "sequence": sequence, "split": path.parent.name, "person": person,
-        "frames": frames_idx, "campose_valid": [bool(arrays["valid"][t]) for t in frames_idx],
+        "frames": frames_idx, "campose_valid": [bool(valid[t]) for t in frames_idx],
     }  # fmt: skip
+    name = f"3dpw_{sequence}_p{person}" if person != "all" else f"3dpw_{sequence}"
     return make_scene(
-        path, frames=frames, fps=PW3D_FPS / stride, name=f"3dpw_{sequence}_p{person}",
-        keypoints2d=scale_points(detected[..., :2], sx, sy), keypoints_conf=detected[..., 2].clamp(0.0, 1.0),
-        keypoints_layout="coco17", gt=gt, metadata=metadata,
+        path, frames=frames, fps=PW3D_FPS / stride, name=name, **estimates[0].fields(), track_id=people[0],
+        others=tuple(estimates[1:]), keypoints_layout="coco17", gt=gt, metadata=metadata,
     )  # fmt: skip
