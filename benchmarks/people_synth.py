@@ -10,7 +10,7 @@ and motions below, 8 frames, 128x256, the default preset (3D or ``--mode 2d``).
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/people_synth.py [--mode 3d|2d] [--people 2,3] [--seeds 30,31]
-      [--variants every,main] [--weights ../shared/checkpoints/raft-small.pth] [--out /tmp/people_synth]
+      [--variants every,main] [--flow '{"people_balance": true}'] [--weights ../shared/checkpoints/raft-small.pth] [--out /tmp/people_synth]
       [--json out.json]
 """
 
@@ -56,6 +56,7 @@ def main() -> None:
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))
     p.add_argument("--out", default="/tmp/people_synth")
     p.add_argument("--variants", default="every,main", help="every (the scene as generated), main (person 0 alone)")
+    p.add_argument("--flow", default="{}", help='extra FlowTTT options as JSON, e.g. \'{"people_balance": true}\'')
     p.add_argument("--json", default=None)
     args = p.parse_args()
     rows = []
@@ -68,7 +69,7 @@ def main() -> None:
                 out = Path(args.out) / f"p{n}_s{seed}_{variant.split()[0]}"
                 shutil.rmtree(out, ignore_errors=True)
                 start = time.perf_counter()
-                result = bootstrap(run_scene, out, mode=args.mode, flow={"weights": args.weights}, progress_bar=False,
+                result = bootstrap(run_scene, out, mode=args.mode, flow={"weights": args.weights, **json.loads(args.flow)}, progress_bar=False,
                                    video=False)  # fmt: skip
                 seconds = time.perf_counter() - start
                 gt = scene.gt.flow

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 
-from lit_boot.core import Person, Scene
+from lit_boot.core import Person, Scene, get_layout
 from lit_boot.flow import SketchConfig, sketch_from_layout, sketch_people
 from lit_boot.flow.data import sketch_inputs
 
@@ -121,3 +122,34 @@ def test_3d_sketch_inputs_have_depths_and_count_a_person_only_where_found():
     assert torch.equal(inputs.depths[:, 1], scene.others[0].joints3d[:-1, :, 2])
     assert (inputs.confidence_t[:, 0] == 1).all() and (inputs.confidence_t1[1, 1] == 0).all()
     assert (inputs.confidence_t1[0, 1] == 1).all()
+
+
+def test_person_balance_makes_every_painted_person_weigh_the_same():
+    from lit_boot.flow import FlowTTT
+    from lit_boot.flow.people_sketch import MAX_BALANCE, person_balance
+
+    big = torch.stack([standing(30, 32, 1.2), standing(32, 32, 1.2)])  # t, t+1
+    small = torch.stack([standing(95, 32, 0.6), standing(94, 32, 0.6)])
+    jt, jt1 = torch.stack([big[0], small[0]])[None], torch.stack([big[1], small[1]])[None]
+    sketch = sketch_people("coco17", jt, jt1, H, W, config=SketchConfig(guard=False, gate="off"))
+    E = len(get_layout("coco17").sketch_bones)
+    weight = person_balance(sketch.owner, sketch.mask, E)
+    person = sketch.owner // E
+    on = [sketch.mask & (person == p) for p in range(2)]
+    n = [int(m.sum()) for m in on]
+    assert n[0] > 1.5 * n[1] > 0
+    assert torch.allclose(weight[on[0]], torch.tensor((n[0] + n[1]) / 2 / n[0]))
+    assert torch.allclose(weight[on[1]], torch.tensor(min((n[0] + n[1]) / 2 / n[1], MAX_BALANCE)))
+    assert float(weight[on[0]].sum()) == pytest.approx(float(weight[on[1]].sum()), rel=1e-5)  # the same in all
+    assert (weight[~sketch.mask] == 1).all()
+    one = person_balance(sketch.owner, sketch.mask & (person == 0), E)
+    assert (one == 1).all()  # one person painted: nothing to balance
+    frames = torch.zeros(2, 3, H, W, dtype=torch.uint8)
+    scene = Scene(frames, keypoints2d=big, keypoints_conf=torch.ones(2, 17),
+                  others=(Person(track_id=1, keypoints2d=small, keypoints_conf=torch.ones(2, 17)),))  # fmt: skip
+    model = FlowTTT(weights=None, sketch=SketchConfig(guard=False, gate="off"), people_balance=True)
+    model.targets_from(scene, torch.zeros(1, 2, H, W), inputs=sketch_inputs(scene, "keypoints2d"))
+    assert model.balance is not None and model.balance.max() > 1 and model.balance.min() < 1
+    off = FlowTTT(weights=None, sketch=SketchConfig(guard=False, gate="off"))
+    off.targets_from(scene, torch.zeros(1, 2, H, W), inputs=sketch_inputs(scene, "keypoints2d"))
+    assert off.balance is None

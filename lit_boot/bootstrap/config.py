@@ -69,13 +69,15 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         # footprint radii of it not at all (they may be the limb's: sketch_gap); in 2D (50
         # epochs) the fit stops when its loss stops falling (3 epochs without a 2% fall) and
         # backpropagates through the last update only; before the flow stages, the zoom stage
-        # refines RAFT's flow where the person is (ZoomConfig). Everything else as paper.
-        # (BENCHMARKS.md, "Speed", "Do no harm" and "The unknown zone")
+        # refines RAFT's flow where the person is (ZoomConfig); in 2D, with several people,
+        # every person's painted pixels weigh the same (people_balance; no effect on one person).
+        # Everything else as paper. (BENCHMARKS.md, "Speed", "Do no harm", "The unknown zone" and
+        # "Several people")
         "flow_3d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 3e-5,
                     "sketch_weight": 5.0, "loss_beta": 0.1},
         "flow_2d": {**FAST_FLOW, "sketch": {"footprint": "cross", "size": 15}, "loss": "final", "lr": 2e-5,
                     "sketch_weight": 5.0, "loss_beta": 0.1, "plateau_patience": 3, "plateau_delta": 0.02,
-                    "grad_updates": 1},
+                    "grad_updates": 1, "people_balance": True},
         "pose_3d": {"confidence": "binary"},
         "pose_2d": {"confidence": "binary"},
         "options": {"scale_footprint": True, "cuda_precision": "16-mixed", "self_check": "photometric",

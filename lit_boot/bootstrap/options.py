@@ -55,6 +55,7 @@ class FlowOptions(TypedDict, total=False):
     crop_margin: int | None
     hold_weight: float
     hold: str
+    people_balance: bool
     warm_start: bool
     paste_crop: bool
     plateau_patience: int | None

@@ -23,7 +23,7 @@ from lightning.pytorch.callbacks import EarlyStopping
 from lightning.pytorch.utilities import rank_zero_warn
 from torch.utils.data import DataLoader
 
-from ..core import Scene
+from ..core import Scene, get_layout
 from ..finite import FiniteGuard
 from ..metrics import EndPointError, FlowMetrics
 from ..optim import adam
@@ -33,7 +33,7 @@ from .evidence import forward_backward_check
 from .gate import gate_sketch
 from .losses import SketchLoss
 from .raft import load_raft, predict_flow
-from .people_sketch import sketch_people
+from .people_sketch import person_balance, sketch_people
 from .sketch import SketchConfig, footprint_offsets, sketch_from_layout, target_flow
 from .warm import TUNED_PARTS, WarmStart
 
@@ -88,6 +88,9 @@ class FlowTTT(L.LightningModule):
             flow (one more RAFT pass per pair): RAFT's confident flow as pseudo-labels (cf. Sun,
             Harley and Guibas, "Refining Pre-Trained Motion Models", 2024), the rest left free
             (no loss) where RAFT's flow fails its own check.
+        people_balance: with several people, weigh each person's painted pixels so that every
+            person weighs the same in the loss (:func:`~lit_boot.flow.people_sketch.person_balance`;
+            False: every painted pixel alike, so a small person weighs little).
         warm_start: the fast fine-tune (:mod:`lit_boot.flow.warm`; needs
             ``train_parts="update_block"``): the frozen encoders' outputs and the untuned flow
             (``predict_updates`` iterations, also the target's base flow) are computed once per
@@ -124,6 +127,7 @@ class FlowTTT(L.LightningModule):
         crop_margin: int | None = None,
         hold_weight: float = 1.0,
         hold: str = "all",
+        people_balance: bool = False,
         warm_start: bool = False,
         paste_crop: bool = True,
         plateau_patience: int | None = None,
@@ -244,6 +248,10 @@ class FlowTTT(L.LightningModule):
         self.targets, self.sketch_masks, self.scene = target_flow(base, sketch), sketch.mask, scene
         report = {f"target/rejected_{k}": float(v) for k, v in sketch.rejected.items()}
         self.held = None
+        self.balance = None
+        if self.hparams.people_balance and inputs.joints_t.ndim == 4 and sketch.owner is not None:
+            bones = len(get_layout(inputs.layout).sketch_bones)
+            self.balance = person_balance(sketch.owner, sketch.mask, bones).cpu()
         if self.hparams.hold == "consistent":
             self.held = ~forward_backward_check(base.float(), base_bw.float())[1].cpu()
             report["target/held_fraction"] = self.held.float().mean().item()
@@ -262,7 +270,7 @@ class FlowTTT(L.LightningModule):
         its datamodule's poses (the orchestrator's next flow stage, after the poses changed).
         The warm start's cache stays: the encoders are frozen and the untuned flow is the untuned
         network's."""
-        self.targets = self.sketch_masks = self.scene = self.original = self.held = None
+        self.targets = self.sketch_masks = self.scene = self.original = self.held = self.balance = None
         if self.warm is not None:
             self.warm.boxes = None
 
@@ -342,6 +350,8 @@ class FlowTTT(L.LightningModule):
         weight = self.loss_fn.weights(mask)
         if self.held is not None:  # pseudo-labels: the unpainted pixels RAFT's own check passed
             weight = weight * (mask | self.held[idx].to(self.device)).float()
+        if self.balance is not None:  # every person weighs the same
+            weight = weight * self.balance[idx].to(self.device)
         if self.warm is not None:
             loss = self.warm.loss(idx, target, weight)
             if loss is None:  # no pair of the batch has a box: nothing to learn here

@@ -13,7 +13,11 @@ from torch import Tensor
 from ..core.joints import JointLayout, get_layout
 from .sketch import SketchConfig, SketchResult, sketch_flow
 
-__all__ = ["sketch_people"]
+__all__ = ["sketch_people", "person_balance", "MAX_BALANCE"]
+
+#: The largest factor :func:`person_balance` gives a person's pixels (a tiny person's few pixels
+#: must not dominate the loss), chosen beforehand, not tuned.
+MAX_BALANCE = 4.0
 
 
 def sketch_people(
@@ -54,3 +58,20 @@ def sketch_people(
     return sketch_flow(unflat(jt), unflat(jt1), bones, height, width, confidence_t=unflat(ct),
                        confidence_t1=unflat(ct1), depths=order, base_flow=base_flow, config=config,
                        groups=groups)  # fmt: skip
+
+
+def person_balance(owner: Tensor, mask: Tensor, bones_per_person: int) -> Tensor:
+    """Loss weights (B, H, W) float that make every painted person weigh the same: 1 off the
+    painted pixels; on person p's (``owner // bones_per_person == p``, owner: the sketch's bone
+    per pixel, person-major as :func:`sketch_people` draws them) mean_q(n_q) / n_p, capped at
+    :data:`MAX_BALANCE`, where n_p counts person p's painted pixels over all B pairs (people
+    with none left out). With fewer than two people painted: all 1."""
+    person = torch.where(mask & (owner >= 0), owner // bones_per_person, torch.full_like(owner, -1))
+    weight = torch.ones(owner.shape, dtype=torch.float32, device=owner.device)
+    ids, counts = torch.unique(person[person >= 0], return_counts=True)
+    if len(ids) < 2:
+        return weight
+    factors = (counts.float().mean() / counts.float()).clamp(max=MAX_BALANCE)
+    for i, factor in zip(ids.tolist(), factors.tolist()):
+        weight[person == i] = factor
+    return weight
