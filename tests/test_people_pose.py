@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from lit_boot.estimate.mediapipe_pose import poses_from_landmarks
-from lit_boot.estimate.people_pose import estimate_people, pose_in_box
+from lit_boot.estimate.people_pose import MediaPipeCrops, estimate_people, mask_frames, pose_in_box
 from test_estimate_mediapipe import _world, needs_mediapipe
 
 H, W = 120, 200
@@ -50,6 +50,10 @@ def assemble(frames: torch.Tensor):
     return partial(lambda lm, c, w, f: poses_from_landmarks(lm, c, w, f, (H, W), source="fake"))
 
 
+def crops(frames: torch.Tensor) -> MediaPipeCrops:
+    return MediaPipeCrops(StandingAtTheBrightest(), assemble(frames))
+
+
 def two_people(T: int = 4):
     """A (tall, bright) at x = 40, B (short, dimmer) at x = 150; in the last frame a third
     bright spot sits just left of B's box, inside B's crop but outside its box."""
@@ -64,7 +68,7 @@ def two_people(T: int = 4):
 
 def test_each_tracked_person_gets_the_pose_found_in_their_box():
     frames, detector = two_people()
-    est = estimate_people(StandingAtTheBrightest(), frames, detector, "all", assemble(frames), {"run": 1})
+    est = estimate_people(crops(frames), frames, detector, "all", {"run": 1})
     assert est.num_people == 2 and [p.track_id for p in est.people()] == [0, 1]
     main, other = est.people()
     hips = lambda p: p.keypoints2d[:, 11:13].mean(1)  # noqa: E731  COCO-17 hips
@@ -80,16 +84,16 @@ def test_each_tracked_person_gets_the_pose_found_in_their_box():
 
 def test_people_largest_or_one_keeps_the_most_prominent_and_a_track_without_a_pose_is_left_out():
     frames, detector = two_people()
-    largest = estimate_people(StandingAtTheBrightest(), frames, detector, "largest", assemble(frames), {})
+    largest = estimate_people(crops(frames), frames, detector, "largest")
     assert largest.num_people == 1 and largest.person_boxes[0, 0] == 20.0
     frames[:, :, 60, 40] = 0  # A is dark: the detector's box but no pose
-    est = estimate_people(StandingAtTheBrightest(), frames, detector, "all", assemble(frames), {})
+    est = estimate_people(crops(frames), frames, detector, "all")
     assert est.num_people == 1 and est.track_id == 1 and est.metadata["people_without_pose"] == [0]
 
 
 def test_nobody_gives_zero_confidences():
     frames = torch.zeros(3, 3, H, W, dtype=torch.uint8)
-    est = estimate_people(StandingAtTheBrightest(), frames, KnownBoxes([[]] * 3), "all", assemble(frames), {})
+    est = estimate_people(crops(frames), frames, KnownBoxes([[]] * 3), "all")
     assert est.num_people == 1 and not est.found().any() and est.person_boxes is None
 
 
@@ -120,3 +124,34 @@ def test_the_street_clip_gives_several_people_each_inside_their_track(shared, tm
     boxes = back.person_boxes
     area = lambda b: ((b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1]) * b[:, 4]).sum()  # noqa: E731
     assert all(area(boxes) >= area(p.person_boxes) for p in back.others)  # the main person is the most prominent
+
+
+class AtTheBoxCentre:
+    """Another estimator plugged in through the protocol: every keypoint at the box's centre,
+    shifted ``shift`` px right in the frames listed in ``off`` (a neighbour's pose)."""
+
+    def __init__(self, shift: float = 0.0, off: tuple[int, ...] = ()):
+        self.shift, self.off = shift, off
+
+    def estimate_person(self, frames, boxes):
+        from lit_boot.data.readers import PoseEstimates
+
+        centre = (boxes[:, :2] + boxes[:, 2:4]) / 2
+        for t in self.off:
+            centre[t, 0] += self.shift
+        found = (boxes[:, 4] > 0).float()
+        return PoseEstimates(keypoints2d=centre[:, None].expand(-1, 17, 2).clone(),
+                             keypoints_conf=found[:, None].expand(-1, 17).clone(), keypoints_layout="coco17")
+
+    def keep_frames(self, estimates, keep):
+        return mask_frames(estimates, keep)
+
+
+def test_another_estimator_plugs_in_through_the_protocol():
+    frames, detector = two_people()
+    est = estimate_people(AtTheBoxCentre(shift=100.0, off=(2,)), frames, detector, "all")
+    assert est.num_people == 2 and est.cameras is None
+    main, other = est.people()
+    assert torch.allclose(other.keypoints2d[0, 0], torch.tensor([150.0, 70.0]))
+    assert (main.keypoints_conf[2] == 0).all() and (main.keypoints_conf[[0, 1, 3]] == 1).all()  # frame 2: not theirs
+    assert [r["not_theirs"] for r in est.metadata["people"]] == [1, 1]

@@ -12,7 +12,9 @@ detector is built); ``main_person_boxes(detections)`` follows one person over th
 to the estimates: the region the method zooms on). ``track_people(detections)`` follows every
 person (ids kept through crossings), and ``estimate_poses(..., people="all")`` gives each tracked
 person a pose, top-down (the main person first, the others in ``PoseEstimates.others``).
-``read_tracked_estimates(path)`` reads every person of an external COCO keypoint or DCPose file,
+``estimate_people(estimator, frames, detector, people)`` runs any top-down
+:class:`PersonPoseEstimator` (``estimate_person(frames, boxes)``, ``keep_frames(estimates, keep)``;
+MediaPipe's is :class:`MediaPipeCrops`) on every tracked person. ``read_tracked_estimates(path)`` reads every person of an external COCO keypoint or DCPose file,
 linked into tracks by the file's track ids or by the same tracker.
 """
 
@@ -43,7 +45,7 @@ from .mediapipe_pose import (
     summary_line,
 )
 from .keypoint_tracks import link_keypoint_people, read_tracked_estimates
-from .people_pose import estimate_people, pose_in_box
+from .people_pose import MediaPipeCrops, PersonPoseEstimator, estimate_people, mask_frames, pose_in_box
 from .people_track import PEOPLE_CHOICES, parse_people, select_people, track_people
 from .person_track import main_person_boxes, person_boxes
 from .tracking import JUMP_POLICIES, drop_jumps, find_jumps
@@ -59,6 +61,9 @@ from .world_to_lsp import (
 
 __all__ = [
     "link_keypoint_people",
+    "PersonPoseEstimator",
+    "MediaPipeCrops",
+    "mask_frames",
     "read_tracked_estimates",
     "INSTALL_HINT",
     "MEDIAPIPE_VERSION",

@@ -289,7 +289,7 @@ def _people(mp: Any, frames: torch.Tensor, frame_indices: torch.Tensor | None, p
             model_complexity: int, min_detection_confidence: float, max_jump: float, on_jump: str) -> PoseEstimates:  # fmt: skip
     """Every tracked person's pose, top-down (:func:`~.people_pose.estimate_people`)."""
     from .detector import PersonDetector
-    from .people_pose import estimate_people
+    from .people_pose import MediaPipeCrops, estimate_people
     from .people_track import parse_people
 
     people = parse_people(people)
@@ -303,7 +303,7 @@ def _people(mp: Any, frames: torch.Tensor, frame_indices: torch.Tensor | None, p
     meta = {"model_complexity": model_complexity, "min_detection_confidence": min_detection_confidence,
             "mediapipe_version": mp.__version__, "detector": str(detector.path), "mode": "top-down, static crops"}
     with _pose_solution(mp, model_complexity, min_detection_confidence, 0.5, static_image_mode=True) as pose:
-        return estimate_people(pose, frames, detector, people, assemble, meta)
+        return estimate_people(MediaPipeCrops(pose, assemble), frames, detector, people, meta)
 
 
 def _with_crops(mp: Any, raw: dict[str, torch.Tensor], frames: torch.Tensor, boxes: torch.Tensor,

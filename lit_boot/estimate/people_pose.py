@@ -9,13 +9,14 @@ track's person: a pose counts for the track only where the centre of its confide
 box lies inside the track's box (else the frame has confidence 0 for that person, counted in
 ``metadata["people"][i]["not_theirs"]``). A track on which no pose is found in any frame is left
 out (``metadata["people_without_pose"]``). Person 0 (the main person) is the most prominent
-track with a pose; track ids number the tracks by prominence.
+track with a pose; track ids number the tracks by prominence. Another estimator plugs in through
+:class:`PersonPoseEstimator` (two methods); MediaPipe is :class:`MediaPipeCrops`.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import Any, Protocol
 
 import torch
 
@@ -24,7 +25,7 @@ from ..data.readers.pose_file import PoseEstimates
 from .people_track import select_people, track_people
 from .tracking import body_box
 
-__all__ = ["estimate_people", "pose_in_box"]
+__all__ = ["estimate_people", "pose_in_box", "PersonPoseEstimator", "MediaPipeCrops", "mask_frames"]
 
 
 def pose_in_box(keypoints: torch.Tensor, conf: torch.Tensor, boxes: torch.Tensor) -> torch.Tensor:
@@ -38,47 +39,91 @@ def pose_in_box(keypoints: torch.Tensor, conf: torch.Tensor, boxes: torch.Tensor
     return inside
 
 
-def _one_person(pose: Any, frames: torch.Tensor, boxes: torch.Tensor, assemble: Any) -> tuple[PoseEstimates, int]:
-    """The estimates of the person in ``boxes`` (T, 5), and how many crops showed someone else."""
-    from .crop_pose import crop_landmarks
-    from .world_to_lsp import landmark_confidence
+class PersonPoseEstimator(Protocol):
+    """What :func:`estimate_people` needs of a pose estimator (the protocol another top-down
+    estimator implements to plug in; :class:`MediaPipeCrops` is the built-in one).
 
-    raw = crop_landmarks(pose, frames, boxes, boxes[:, 4] > 0)
-    conf = landmark_confidence(raw["visibility"], raw["presence"])
-    est = assemble(raw["landmarks"], conf, raw["world"], raw["found"])
+    ``estimate_person(frames, boxes)``: one person's PoseEstimates over frames (T, 3, H, W) uint8
+    RGB from their boxes (T, 5) (x0, y0, x1, y1 px, score; 0 = no box: confidence 0 there), in the
+    frames' pixels. ``keep_frames(estimates, keep)``: the same person's estimates counting only
+    the frames ``keep`` (T,) bool (the others are another person's pose); :func:`mask_frames` does
+    it for estimators with nothing to refit.
+    """
+
+    def estimate_person(self, frames: torch.Tensor, boxes: torch.Tensor) -> PoseEstimates: ...
+
+    def keep_frames(self, estimates: PoseEstimates, keep: torch.Tensor) -> PoseEstimates: ...
+
+
+def mask_frames(estimates: PoseEstimates, keep: torch.Tensor) -> PoseEstimates:
+    """``estimates`` with confidence 0 outside the frames ``keep`` (T,) bool."""
+    conf = estimates.keypoints_conf * keep[:, None].to(estimates.keypoints_conf)
+    return replace(estimates, keypoints_conf=conf)
+
+
+class MediaPipeCrops:
+    """The built-in :class:`PersonPoseEstimator`: MediaPipe Pose (static-image mode, ``pose``) on
+    square crops around each box (:func:`~.crop_pose.crop_landmarks`), the estimates made by
+    ``assemble(landmarks, confidence, world, found)`` from MediaPipe-33 arrays
+    (:func:`~.mediapipe_pose.poses_from_landmarks` with the run's options); ``keep_frames`` makes
+    them again from the same landmarks (the 3D fill-in and the cameras then ignore the dropped
+    frames), so MediaPipe runs once per person."""
+
+    def __init__(self, pose: Any, assemble: Any):
+        self.pose, self.assemble = pose, assemble
+        self._raw: tuple[PoseEstimates, dict[str, torch.Tensor], torch.Tensor] | None = None
+
+    def estimate_person(self, frames: torch.Tensor, boxes: torch.Tensor) -> PoseEstimates:
+        from .crop_pose import crop_landmarks
+        from .world_to_lsp import landmark_confidence
+
+        if not bool((boxes[:, 4] > 0).any()):  # nobody: no crop to run MediaPipe on
+            T = frames.shape[0]
+            return self.assemble(torch.zeros(T, 33, 2), torch.zeros(T, 33), torch.zeros(T, 33, 3),
+                                 torch.zeros(T, dtype=torch.bool))  # fmt: skip
+        raw = crop_landmarks(self.pose, frames, boxes, boxes[:, 4] > 0)
+        conf = landmark_confidence(raw["visibility"], raw["presence"])
+        est = self.assemble(raw["landmarks"], conf, raw["world"], raw["found"])
+        self._raw = (est, raw, conf)
+        return est
+
+    def keep_frames(self, estimates: PoseEstimates, keep: torch.Tensor) -> PoseEstimates:
+        if self._raw is None or self._raw[0] is not estimates:
+            return mask_frames(estimates, keep)
+        _, raw, conf = self._raw
+        return self.assemble(raw["landmarks"], conf, raw["world"], raw["found"] & keep)
+
+
+def _one_person(estimator: PersonPoseEstimator, frames: torch.Tensor, boxes: torch.Tensor) -> tuple[PoseEstimates, int]:
+    """The estimates of the person in ``boxes`` (T, 5), and how many crops showed someone else."""
+    est = estimator.estimate_person(frames, boxes)
     others = est.found() & ~pose_in_box(est.keypoints2d, est.keypoints_conf, boxes)
     if not bool(others.any()):
         return est, 0
-    return assemble(raw["landmarks"], conf, raw["world"], raw["found"] & ~others), int(others.sum())
+    return estimator.keep_frames(est, ~others), int(others.sum())
 
 
-def _nobody(assemble: Any, T: int) -> PoseEstimates:
-    """Estimates of nobody in T frames (every confidence 0)."""
-    return assemble(torch.zeros(T, 33, 2), torch.zeros(T, 33), torch.zeros(T, 33, 3), torch.zeros(T, dtype=torch.bool))
-
-
-def estimate_people(pose: Any, frames: torch.Tensor, detector: Any, people: str | int, assemble: Any,
-                    meta: dict[str, Any]) -> PoseEstimates:  # fmt: skip
+def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detector: Any, people: str | int,
+                    meta: dict[str, Any] | None = None) -> PoseEstimates:  # fmt: skip
     """Every tracked person's estimates in frames (T, 3, H, W) uint8 RGB (module docstring).
 
-    ``pose``: a static-image-mode MediaPipe Pose; ``detector``: a
-    :class:`~.detector.PersonDetector`; ``assemble(landmarks, confidence, world, found)``: the
-    estimates of one person from MediaPipe-33 arrays (:func:`~.mediapipe_pose.poses_from_landmarks`
-    with the run's options); ``meta``: the run's own metadata, merged into the main person's.
-    Returns the main person's estimates with the others in ``others``; with no pose found, the
-    confidences are 0 everywhere (and the most prominent track's boxes are kept, if any)."""
+    ``estimator``: a :class:`PersonPoseEstimator` (e.g. :class:`MediaPipeCrops`); ``detector``:
+    anything with ``detect_frames(frames)`` -> per-frame boxes (N_t, 5), as
+    :class:`~.detector.PersonDetector`; ``meta``: the run's own metadata, merged into the main
+    person's. Returns the main person's estimates with the others in ``others``; with no pose
+    found, the confidences are 0 everywhere (and the most prominent track's boxes are kept, if any)."""
     tracks = select_people(track_people(detector.detect_frames(frames)), people)
     estimates, records = [], []
     for track_id, boxes in enumerate(tracks):
-        est, not_theirs = _one_person(pose, frames, boxes, assemble)
+        est, not_theirs = _one_person(estimator, frames, boxes)
         estimates.append(replace(est, person_boxes=boxes, track_id=track_id))
         records.append({"track_id": track_id, "box_frames": int((boxes[:, 4] > 0).sum()),
                         "pose_frames": int(est.found().sum()), "not_theirs": not_theirs})  # fmt: skip
     with_pose = [est for est in estimates if bool(est.found().any())]
-    meta = {**meta, "people": records, "people_asked": people, "tracks": len(tracks),
+    meta = {**(meta or {}), "people": records, "people_asked": people, "tracks": len(tracks),
             "people_without_pose": [r["track_id"] for r in records if not r["pose_frames"]]}  # fmt: skip
     if not with_pose:
-        nobody = _nobody(assemble, frames.shape[0])
+        nobody = estimator.estimate_person(frames, torch.zeros(frames.shape[0], 5))
         return replace(nobody, person_boxes=tracks[0] if len(tracks) else None, metadata={**nobody.metadata, **meta})
     main = with_pose[0]
     return replace(main, metadata={**main.metadata, **meta}, others=tuple(Person.of(est) for est in with_pose[1:]))
