@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from lit_boot.core import Person
 from lit_boot.core.cameras import Cameras
 from lit_boot.data import save_scene
 from lit_boot.data.readers.pose_file import PoseEstimates
@@ -254,3 +255,27 @@ def test_task_load_with_frames_is_slice_of_the_whole(synthetic, tmp_path) -> Non
             assert torch.equal(getattr(part.gt, key), getattr(expected.gt, key))
     with pytest.raises(ValueError, match=r"task 'x': frames \[2, 9\) but the source has 6 frames"):
         Task("x", "scene", {"path": str(tmp_path / "scene")}, frames=(2, 9)).load()
+
+
+def test_stitch_estimates_keeps_every_person_of_a_multi_person_video() -> None:
+    scene = make_scene(motion="walk", frames=10, height=48, width=96, seed=5, people=2)
+    people = scene.people()
+    main, other = people
+
+    def part(start: int, stop: int) -> PoseEstimates:
+        cut = [p.map(lambda x: x[start:stop].clone()) for p in people]
+        return PoseEstimates(**cut[0].fields(), track_id=cut[0].track_id, others=tuple(cut[1:]),
+                             keypoints_layout=scene.keypoints_layout, joints3d_layout=scene.joints3d_layout)
+
+    est = stitch_estimates([(0, part(0, 6)), (4, part(4, 10))], 10)
+    assert [p.track_id for p in est.people()] == [main.track_id, other.track_id]
+    for mine, theirs in zip(est.people(), people):
+        assert torch.allclose(mine.joints3d, theirs.joints3d, atol=1e-4)  # the same values in both parts
+        assert torch.allclose(mine.cameras.params, theirs.cameras.params, atol=1e-4)
+        assert torch.equal(mine.keypoints_conf > 0, theirs.keypoints_conf > 0)
+        assert torch.allclose(mine.person_boxes, theirs.person_boxes, atol=1e-4)
+    lone = part(4, 10)
+    lone = PoseEstimates(**Person.of(lone).fields(), keypoints_layout=scene.keypoints_layout,
+                         joints3d_layout=scene.joints3d_layout)  # fmt: skip
+    with pytest.raises(ValueError, match="differ in people"):
+        stitch_estimates([(0, part(0, 6)), (4, lone)], 10)

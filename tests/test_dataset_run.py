@@ -279,3 +279,16 @@ def test_a_killed_driver_takes_its_workers_along_and_a_rerun_completes(scene_dir
     assert {n: r["state"] for n, r in tasks.items()} == {"s0": "done", "s1": "done", "s2": "done"}
     assert "| dataset | 3/3 done |" in rerun.stdout and "2 done" not in rerun.stdout
     assert all(r["result"]["frames"] == SIZES[i][0] for i, r in enumerate(tasks.values()))
+
+
+def test_a_multi_person_video_runs_chunked_and_keeps_every_person(tmp_path):
+    scene = lit_boot.make_scene(motion="walk", frames=7, height=64, width=96, seed=3, people=2)
+    lit_boot.save_scene(scene, tmp_path / "crowd")
+    task = Task(name="crowd", kind="scene", args={"path": str(tmp_path / "crowd")})
+    result = run_dataset([task], tmp_path / "data", CONFIG, workers=0, chunk_frames=4, chunk_overlap=2)
+    assert result.records[0]["state"] == "done" and result.records[0]["frames"] == 7
+    poses = lit_boot.read_estimates(tmp_path / "data" / "scenes" / "crowd" / "poses.npz")
+    assert poses.num_people == 2 and [p.track_id for p in poses.people()] == [p.track_id for p in scene.people()]
+    assert all(p.joints3d.shape[0] == 7 and torch.isfinite(p.joints3d).all() for p in poses.people())
+    assert not torch.allclose(poses.others[0].joints3d, scene.others[0].joints3d)  # refined too
+    assert "mpjpe_mm_all" in result.metrics["final"]

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import torch
 
 from ..core.cameras import Cameras
+from ..core.people import Person
 from ..core.scene import GroundTruth, Scene
 
 if TYPE_CHECKING:
@@ -280,42 +281,54 @@ def _stitch_frame_indices(parts: list[tuple[int, PoseEstimates]], num_frames: in
     return out
 
 
-def stitch_estimates(parts: list[tuple[int, PoseEstimates]], num_frames: int) -> PoseEstimates:
-    """Per-chunk pose estimates, (start frame, PoseEstimates of T_c rows) in order of start, as
-    one PoseEstimates of ``num_frames`` rows: keypoints2d (weighted by their confidences too),
-    keypoints_conf, joints3d and the cameras' params and crops by :func:`stitch_sequences` (the
-    cross-fade); layouts, camera model, image_size must agree across parts. ``metadata``: {"chunks": [[start, stop], ...],
-    "parts": [each part's metadata]}."""
-    from ..data.readers.pose_file import PoseEstimates
-
-    if not parts:
-        raise ValueError("stitch_estimates: no parts given")
-    first = parts[0][1]
+def _stitch_person(parts: list[tuple[int, Person]], num_frames: int, camera_model: tuple | None) -> Person:
+    """One person's per-chunk fields, (start frame, Person) in order of start, cross-faded into
+    ``num_frames`` rows (keypoints weighted by their confidences too)."""
 
     def stitch(get, confidences: list[torch.Tensor] | None = None) -> torch.Tensor | None:
-        values = [get(est) for _, est in parts]
+        values = [get(person) for _, person in parts]
         if all(v is None for v in values):
             return None
         if any(v is None for v in values):
             raise ValueError("stitch_estimates: a field is present in some parts only")
         return stitch_sequences([(start, v) for (start, _), v in zip(parts, values)], num_frames, confidences)
 
+    cameras = None
+    if camera_model is not None:
+        cameras = Cameras(camera_model[0], stitch(lambda p: p.cameras.params), stitch(lambda p: p.cameras.crops),
+                          camera_model[1])  # fmt: skip
+    has_conf = all(p.keypoints_conf is not None for _, p in parts)  # a keypoint not found lends no position
+    conf = [p.keypoints_conf for _, p in parts] if has_conf and parts[0][1].keypoints2d is not None else None
+    return Person(parts[0][1].track_id, joints3d=stitch(lambda p: p.joints3d), cameras=cameras,
+                  keypoints2d=stitch(lambda p: p.keypoints2d, conf), keypoints_conf=stitch(lambda p: p.keypoints_conf),
+                  person_boxes=stitch(lambda p: p.person_boxes))  # fmt: skip
+
+
+def stitch_estimates(parts: list[tuple[int, PoseEstimates]], num_frames: int) -> PoseEstimates:
+    """Per-chunk pose estimates, (start frame, PoseEstimates of T_c rows) in order of start, as
+    one PoseEstimates of ``num_frames`` rows: every person's (the same tracks in every part)
+    keypoints2d (weighted by their confidences too), keypoints_conf, joints3d, boxes and the
+    cameras' params and crops by :func:`stitch_sequences` (the cross-fade); layouts, camera
+    model, image_size must agree across parts. ``metadata``: {"chunks": [[start, stop], ...],
+    "parts": [each part's metadata]}."""
+    from ..data.readers.pose_file import PoseEstimates
+
+    if not parts:
+        raise ValueError("stitch_estimates: no parts given")
+    first = parts[0][1]
     for key in ("keypoints_layout", "joints3d_layout", "image_size"):
         _same(parts, lambda e: getattr(e, key), key)
-    cameras = None
-    if first.cameras is not None or any(e.cameras is not None for _, e in parts):
+    model = None
+    if any(e.cameras is not None for _, e in parts):
         model = _same(parts, lambda e: None if e.cameras is None else (e.cameras.model, e.cameras.crop_size),
                       "cameras (model, crop_size)")  # fmt: skip
-        cameras = Cameras(model[0], stitch(lambda e: e.cameras.params), stitch(lambda e: e.cameras.crops), model[1])
+    ids = _same(parts, lambda e: [p.track_id for p in e.people()], "people (track ids)")
+    main, *others = [_stitch_person([(start, e.people()[i]) for start, e in parts], num_frames, model)
+                     for i in range(len(ids))]  # fmt: skip
     sources = list(dict.fromkeys(est.source for _, est in parts))
-    has_conf = all(e.keypoints_conf is not None for _, e in parts)  # a keypoint not found lends no position
-    conf = [e.keypoints_conf for _, e in parts] if has_conf and first.keypoints2d is not None else None
     return PoseEstimates(
-        keypoints2d=stitch(lambda e: e.keypoints2d, conf), keypoints_conf=stitch(lambda e: e.keypoints_conf),
-        keypoints_layout=first.keypoints_layout, joints3d=stitch(lambda e: e.joints3d),
-        joints3d_layout=first.joints3d_layout, cameras=cameras,
-        frame_indices=_stitch_frame_indices(parts, num_frames), image_size=first.image_size,
-        source="+".join(sources), metadata={"chunks": [[s, s + e.num_frames] for s, e in parts],
-                                            "parts": [e.metadata for _, e in parts]},
-        person_boxes=stitch(lambda e: e.person_boxes),
+        **main.fields(), track_id=main.track_id, others=tuple(others), keypoints_layout=first.keypoints_layout,
+        joints3d_layout=first.joints3d_layout, frame_indices=_stitch_frame_indices(parts, num_frames),
+        image_size=first.image_size, source="+".join(sources),
+        metadata={"chunks": [[s, s + e.num_frames] for s, e in parts], "parts": [e.metadata for _, e in parts]},
     )  # fmt: skip
