@@ -72,8 +72,26 @@ def test_a_run_on_two_people_records_every_persons_metrics(pair, tmp_path):
     flow = next(r for r in result.history if r["kind"] == "flow")
     assert {"kp2d_px", "kp2d_px_all", f"kp2d_px_person{other}"} <= set(pose)
     assert {"epe_person", f"epe_person_person{other}", f"epe_person_person{pair.track_id}"} <= set(flow)
+    shares = flow["info"]["self_check"]["people"]  # the self-check's share kept on each person's region
+    assert [s["track_id"] for s in shares] == [pair.track_id, other]
+    assert all(0.0 <= s["tuned_fraction"] <= 1.0 for s in shares)
     final = json.loads((tmp_path / "run" / "summary.json").read_text())
     text = json.dumps(final)
     assert f"kp2d_px_person{other}" in text and f"epe_person_person{other}" in text
     report = (tmp_path / "run" / "report.html").read_text()
     assert f"kp2d_px_person{other}" in report
+
+
+def test_the_self_check_share_of_each_persons_region():
+    from lit_boot.bootstrap.selfcheck import people_shares, summary_line
+
+    people = torch.full((2, 40, 120), -1, dtype=torch.int8)
+    people[:, 10:30, 10:20] = 0
+    people[:, 10:30, 90:100] = 1
+    weight = torch.zeros(2, 40, 120)
+    weight[:, :, :60] = 1.0  # the tuned flow kept on the left half only
+    shares = people_shares(weight, people, [4, 9])
+    assert shares == [{"track_id": 4, "tuned_fraction": 1.0}, {"track_id": 9, "tuned_fraction": 0.0}]
+    record = {"kept_tuned_fraction": 0.5, "person_tuned_fraction": 0.5, "regions_tuned": 1, "regions_initial": 1,
+              "people": shares}  # fmt: skip
+    assert "50% of the person (4: 100%, 9: 0%)" in summary_line(record)

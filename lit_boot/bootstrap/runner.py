@@ -63,7 +63,7 @@ from .interrupt import RunInterrupted, interruptible
 from .lock import RunLock
 from .outputs import write_outputs
 from .result import BootstrapResult
-from .selfcheck import check_stage, summary_line
+from .selfcheck import check_stage, people_shares, summary_line
 from .stages import fine_tune_flow, make_flow_model, predict_flows, quiet_refiner, refine_poses_stage
 from .zoom import zoom_line, zoom_stage
 
@@ -219,6 +219,9 @@ class Bootstrap:
         if 0 < run < cfg.epochs:
             log.info(f"  plateau: the training loss stopped falling; stopped after {run} of {cfg.epochs} epochs")
         if check is not None:
+            painted_by = self.models[0].sketch_people
+            if painted_by is not None:  # several people: each one's share kept
+                check["people"] = people_shares(kept, painted_by, [p.track_id for p in st.scene.people()])
             record["info"]["self_check"] = check
             log.info(summary_line(check))
         kept = kept if kept is not None else torch.ones(mean.shape[0], *mean.shape[-2:])

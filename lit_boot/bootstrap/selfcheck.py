@@ -48,7 +48,7 @@ from .config import SELF_CHECKS, BootstrapConfig, SelfCheckConfig
 
 __all__ = ["SELF_CHECKS", "SelfCheckConfig", "region_labels", "region_names", "choose_regions", "choose_pixels",
            "blend_weights", "changed_box",
-           "self_check", "check_stage", "summary_line"]
+           "self_check", "check_stage", "summary_line", "people_shares"]
 
 #: Regions with fewer valid pixels than this keep the initial flow (too little evidence).
 MIN_PIXELS = 16
@@ -258,9 +258,27 @@ def check_stage(
     return flows, {**record, "tuned_metrics": scene_flow_metrics(scene.gt, tuned, scene.track_id)}, weight
 
 
+def people_shares(weight: Tensor, people: Tensor, track_ids: list[int]) -> list[dict[str, Any]]:
+    """Each person's share of their own region kept tuned: weight (T-1, H, W) the tuned flow's
+    share per pixel, people (T-1, H, W) int the person (index in ``track_ids``) who painted each
+    pixel, -1 none; a person's region is their sketch dilated as the person region
+    (:func:`~lit_boot.flow.crops.person_region`). [{"track_id", "tuned_fraction"}, ...]."""
+    from ..flow import person_region
+
+    out = []
+    for p, track_id in enumerate(track_ids):
+        region = person_region(people == p)
+        share = float(weight[region.to(weight.device)].mean()) if region.any() else 0.0
+        out.append({"track_id": int(track_id), "tuned_fraction": round(share, 4)})
+    return out
+
+
 def summary_line(record: dict) -> str:
     """One line for the console: how much of the tuned flow the self-check kept."""
     tiles = record["regions_tuned"] + record["regions_initial"]
+    people = record.get("people") or []
+    each = (" (" + ", ".join(f"{p['track_id']}: {100 * p['tuned_fraction']:.0f}%" for p in people) + ")"
+            if len(people) > 1 else "")  # fmt: skip
     return (f"  self-check: kept the tuned flow on {100 * record['kept_tuned_fraction']:.0f}% of the pixels "
-            f"({100 * record['person_tuned_fraction']:.0f}% of the person, {record['regions_tuned']} of {tiles} "
+            f"({100 * record['person_tuned_fraction']:.0f}% of the person{each}, {record['regions_tuned']} of {tiles} "
             "background tiles), the initial flow elsewhere")

@@ -163,6 +163,7 @@ class FlowTTT(L.LightningModule):
         self.targets: torch.Tensor | None = None  # (P, 2, H, W) on CPU
         self.sketch_masks: torch.Tensor | None = None  # (P, H, W)
         self.held: torch.Tensor | None = None  # (P, H, W) bool with hold="consistent": the unpainted pixels held
+        self.sketch_people: torch.Tensor | None = None  # (P, H, W) int8 with several people: who painted it, -1
         self.scene: Scene | None = None  # the scene the targets were prepared for
         self.original: torch.Tensor | None = None  # (P, 2, H, W): the untuned network's prediction
         self.target_report: dict[str, float] = {}
@@ -248,10 +249,12 @@ class FlowTTT(L.LightningModule):
         self.targets, self.sketch_masks, self.scene = target_flow(base, sketch), sketch.mask, scene
         report = {f"target/rejected_{k}": float(v) for k, v in sketch.rejected.items()}
         self.held = None
-        self.balance = None
-        if self.hparams.people_balance and inputs.joints_t.ndim == 4 and sketch.owner is not None:
+        self.balance = self.sketch_people = None
+        if inputs.joints_t.ndim == 4 and sketch.owner is not None:  # several people: whose each painted pixel is
             bones = len(get_layout(inputs.layout).sketch_bones)
-            self.balance = person_balance(sketch.owner, sketch.mask, bones).cpu()
+            self.sketch_people = torch.where(sketch.mask, sketch.owner // bones, -1).to(torch.int8).cpu()
+            if self.hparams.people_balance:
+                self.balance = person_balance(sketch.owner, sketch.mask, bones).cpu()
         if self.hparams.hold == "consistent":
             self.held = ~forward_backward_check(base.float(), base_bw.float())[1].cpu()
             report["target/held_fraction"] = self.held.float().mean().item()
@@ -271,6 +274,7 @@ class FlowTTT(L.LightningModule):
         The warm start's cache stays: the encoders are frozen and the untuned flow is the untuned
         network's."""
         self.targets = self.sketch_masks = self.scene = self.original = self.held = self.balance = None
+        self.sketch_people = None
         if self.warm is not None:
             self.warm.boxes = None
 
