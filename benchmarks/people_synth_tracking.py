@@ -10,7 +10,7 @@ definition). Scenes: make_scene(people=N, frames=--frames, 128x256), seeds and m
 the other people walk across, crossing and occluding person 0.
 
 Usage: python benchmarks/people_synth_tracking.py [--people 2,3] [--seeds 30,31,32,33]
-           [--frames 16] [--jitter 0.05] [--miss 0.1] [--json out.json]
+           [--frames 16] [--jitter 0.05] [--miss 0.1] [--smoothing 0.5] [--json out.json]
 """
 
 from __future__ import annotations
@@ -75,6 +75,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=16)
     parser.add_argument("--jitter", type=float, default=0.05)
     parser.add_argument("--miss", type=float, default=0.1)
+    parser.add_argument("--smoothing", type=float, default=None, help="track_people's smoothing (default: its own)")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     print("| scene | person: visible frames, covered, identity switches | tracks |")
@@ -86,7 +87,7 @@ def main() -> None:
                                people=n)  # fmt: skip
             g = torch.Generator().manual_seed(seed)
             dets, who = detections_of(scene, args.jitter, args.miss, g)
-            tracks = track_people(dets)
+            tracks = track_people(dets, **({} if args.smoothing is None else {"smoothing": args.smoothing}))
             visible = torch.stack([p.person_boxes[:, 4] > 0 for p in scene.people()])
             rows = score(tracks, dets, who, visible)
             out.append({"people": n, "seed": seed, "tracks": int(tracks.shape[0]), "rows": rows})

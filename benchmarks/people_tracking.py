@@ -7,7 +7,7 @@ pose (estimate_poses(people="all"), top-down), with their wall times.
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/people_tracking.py [--videos basketball,football,street]
       [--detector ../shared/checkpoints/yolox_nano.onnx] [--frames 0,10,20] [--out /tmp/people_tracking]
-      [--poses]
+      [--poses] [--smoothing 0.5]
 """
 
 from __future__ import annotations
@@ -68,6 +68,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("/tmp/people_tracking"))
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--poses", action="store_true", help="also time the default and the top-down estimator")
+    parser.add_argument("--smoothing", type=float, default=None, help="track_people's smoothing (default: its own)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     detector, rows = PersonDetector(args.detector), []
@@ -76,7 +77,7 @@ def main() -> None:
         start = time.perf_counter()
         detections = detector.detect_frames(frames)
         detect_s = time.perf_counter() - start
-        tracks = track_people(detections)
+        tracks = track_people(detections, **({} if args.smoothing is None else {"smoothing": args.smoothing}))
         track_s = time.perf_counter() - start - detect_s
         T = frames.shape[0]
         picks = [int(v) for v in args.frames.split(",")] if args.frames else sorted({0, T // 3, 2 * T // 3, T - 1})

@@ -2,7 +2,8 @@
 
 :func:`track_people` links each frame's detections to the open tracks by an optimal assignment
 (scipy's ``linear_sum_assignment``) on a cost from each track's *predicted* box: its last box
-moved on by the track's velocity (px per frame, a running mean of its centre's motion), so that
+moved on by the track's velocity (px per frame, a running mean of its centre's motion, each
+frame weighing ``smoothing``), so that
 two people who cross keep their ids. The cost of a detection for a track is ``1 - IoU`` with the
 predicted box when they overlap by at least ``min_iou``, else ``1 + d / reach`` when the centres
 are ``d`` px apart within ``reach`` = ``max_jump`` x the box's larger side x the frames since it
@@ -33,6 +34,9 @@ log = logging.getLogger(__name__)
 
 #: The cost of leaving a track or a detection unmatched in a frame (pair costs lie in [0, 2]).
 MISS_COST = 1.0
+#: The weight of a frame's own motion in a track's velocity (BENCHMARKS.md, "The tracker on
+#: synthetic crossings").
+SMOOTHING = 0.1
 #: The named choices of ``people`` (or a number N >= 1: the N most prominent).
 PEOPLE_CHOICES = ("all", "largest")
 
@@ -47,10 +51,10 @@ class _Track:
         box = self.boxes[self.last][:4]
         return box + (self.velocity * (t - self.last)).repeat(2)
 
-    def add(self, t: int, det: torch.Tensor) -> None:
+    def add(self, t: int, det: torch.Tensor, smoothing: float = SMOOTHING) -> None:
         if self.boxes:
             step = (_centre(det[:4]) - _centre(self.boxes[self.last][:4])) / (t - self.last)
-            self.velocity = step if len(self.boxes) == 1 else 0.5 * self.velocity + 0.5 * step
+            self.velocity = step if len(self.boxes) == 1 else (1 - smoothing) * self.velocity + smoothing * step
         self.boxes[t], self.last = det.clone(), t
 
 
@@ -105,14 +109,14 @@ def _assign(cost: torch.Tensor, miss: float = MISS_COST) -> list[tuple[int, int]
 
 
 def _link(detections: Sequence[torch.Tensor], max_gap: int, min_iou: float, max_jump: float,
-          max_scale: float) -> list[_Track]:  # fmt: skip
+          max_scale: float, smoothing: float) -> list[_Track]:  # fmt: skip
     tracks: list[_Track] = []
     for t, dets in enumerate(detections):
         open_ = [tr for tr in tracks if t - tr.last <= max_gap + 1]
         matched: set[int] = set()
         if open_ and dets.shape[0]:
             for r, c in _assign(_costs(open_, t, dets, min_iou, max_jump, max_scale)):
-                open_[r].add(t, dets[c])
+                open_[r].add(t, dets[c], smoothing)
                 matched.add(c)
         for c in range(dets.shape[0]):
             if c not in matched:
@@ -143,6 +147,7 @@ def track_people(
     min_iou: float = 0.1,
     max_scale: float = 2.5,
     min_frames: int = 2,
+    smoothing: float = SMOOTHING,
 ) -> torch.Tensor:
     """Every person's box in each frame, from per-frame detections (T tensors (N_t, 5): x0, y0,
     x1, y1 px, score, as :meth:`PersonDetector.detect_frames` gives them).
@@ -155,6 +160,8 @@ def track_people(
         min_iou: the overlap with the predicted box that counts as overlapping.
         max_scale: the largest ratio of box sizes (larger sides) one track accepts.
         min_frames: tracks detected in fewer frames (capped at T) are dropped.
+        smoothing: the weight of a frame's own motion in the track's velocity (a running mean;
+            lower: a longer memory, which carries a track through a crossing).
 
     Returns:
         (P, T, 5) float32: each track's box and score per frame (zeros where the person is
@@ -167,11 +174,13 @@ def track_people(
             raise ValueError(f"{name}: expected a positive number, got {value!r}")
     if not 0 < min_iou <= 1:
         raise ValueError(f"min_iou: expected a number in (0, 1], got {min_iou!r}")
+    if not 0 < smoothing <= 1:
+        raise ValueError(f"smoothing: expected a number in (0, 1], got {smoothing!r}")
     if isinstance(min_frames, bool) or not isinstance(min_frames, int) or min_frames < 1:
         raise ValueError(f"min_frames: expected a number of frames >= 1, got {min_frames!r}")
     detections = check_detections(detections)
     T = len(detections)
-    tracks = [tr for tr in _link(detections, max_gap, min_iou, max_jump, max_scale)
+    tracks = [tr for tr in _link(detections, max_gap, min_iou, max_jump, max_scale, smoothing)
               if len(tr.boxes) >= min(min_frames, T)]  # fmt: skip
     if not tracks:
         return torch.zeros(0, T, 5)
