@@ -95,6 +95,8 @@ def test_no_detections_give_no_tracks_and_bad_input_is_named():
         track_people(frames_of([]), max_gap=-1)
     with pytest.raises(ValueError, match="min_iou"):
         track_people(frames_of([]), min_iou=0)
+    with pytest.raises(ValueError, match="smoothing: expected a number in"):
+        track_people(frames_of([]), smoothing=0)
 
 
 def test_select_people():
@@ -121,3 +123,28 @@ def test_a_good_match_is_not_traded_for_two_poor_ones():
     tracks = track_people(frames_of(*dets))
     torch.testing.assert_close(centre_x(tracks[0]), torch.tensor(xa))
     assert tracks.shape[0] == 2 and (tracks[1, 3, 4] == 0) and (tracks[1, 1:3, 4] > 0).all()
+
+
+def test_a_synthetic_crossing_keeps_both_ids():
+    """Two people of a synthetic scene cross (the far one hidden behind the near one, its box
+    shrinking to its visible part); the true boxes, in a shuffled order: each track follows one
+    person, and each person is one track (with smoothing 0.5 the hidden one split in three)."""
+    from lit_boot.synth import make_scene
+
+    scene = make_scene(frames=16, height=128, width=256, motion="walk", seed=30, people=2)
+    boxes = torch.stack([p.person_boxes for p in scene.people()])  # (2, T, 5)
+    g = torch.Generator().manual_seed(0)
+    dets, owners = [], []
+    for t in range(boxes.shape[1]):
+        order = torch.randperm(2, generator=g).tolist()
+        dets.append(boxes[order, t])
+        owners.append(order)
+    for smoothing, whole in ((0.1, True), (0.5, False)):
+        tracks = track_people(dets, smoothing=smoothing)
+        followed = []
+        for track in tracks:
+            who = {owners[t][int((dets[t] == track[t]).all(-1).nonzero()[0])] for t in range(len(dets))
+                   if track[t, 4] > 0 and (dets[t] == track[t]).all(-1).any()}  # fmt: skip
+            followed.append(who)
+        assert all(len(w) == 1 for w in followed)
+        assert (len(tracks) == 2 and sorted(min(w) for w in followed) == [0, 1]) == whole
