@@ -94,4 +94,4 @@ def test_the_self_check_share_of_each_persons_region():
     assert shares == [{"track_id": 4, "tuned_fraction": 1.0}, {"track_id": 9, "tuned_fraction": 0.0}]
     record = {"kept_tuned_fraction": 0.5, "person_tuned_fraction": 0.5, "regions_tuned": 1, "regions_initial": 1,
               "people": shares}  # fmt: skip
-    assert "50% of the person (4: 100%, 9: 0%)" in summary_line(record)
+    assert "50% of the people: track 4 100%, track 9 0%; 1 of 2 background tiles" in summary_line(record)

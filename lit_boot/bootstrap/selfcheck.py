@@ -277,8 +277,9 @@ def summary_line(record: dict) -> str:
     """One line for the console: how much of the tuned flow the self-check kept."""
     tiles = record["regions_tuned"] + record["regions_initial"]
     people = record.get("people") or []
-    each = (" (" + ", ".join(f"{p['track_id']}: {100 * p['tuned_fraction']:.0f}%" for p in people) + ")"
-            if len(people) > 1 else "")  # fmt: skip
+    who = "the person,"
+    if len(people) > 1:
+        who = "the people: " + ", ".join(f"track {p['track_id']} {100 * p['tuned_fraction']:.0f}%" for p in people) + ";"
     return (f"  self-check: kept the tuned flow on {100 * record['kept_tuned_fraction']:.0f}% of the pixels "
-            f"({100 * record['person_tuned_fraction']:.0f}% of the person{each}, {record['regions_tuned']} of {tiles} "
+            f"({100 * record['person_tuned_fraction']:.0f}% of {who} {record['regions_tuned']} of {tiles} "
             "background tiles), the initial flow elsewhere")
