@@ -2,7 +2,8 @@
 
 The public API:
 
-- the scene model: :class:`Scene`, :class:`GroundTruth`, :class:`Cameras`, joint layouts
+- the scene model: :class:`Scene`, :class:`GroundTruth`, :class:`Cameras`, the other people of a
+  scene (:class:`Person`, :class:`PersonTruth`), joint layouts
   (:data:`LSP14`, :data:`COCO17`, :data:`H36M17`, :data:`MEDIAPIPE33`) and :func:`map_joints`;
 - scene folders: :func:`load_scene`, :func:`save_scene`; Middlebury flow: :func:`read_flo`,
   :func:`write_flo`;
@@ -41,6 +42,8 @@ if TYPE_CHECKING:  # what the lazy names below resolve to, for type checkers and
         Cameras,
         GroundTruth,
         JointLayout,
+        Person,
+        PersonTruth,
         Scene,
         SceneValidationError,
         get_layout,
@@ -66,7 +69,7 @@ from ._version import __version__
 #: Public name -> the subpackage that defines it (imported when the name is first used).
 _LAZY = {
     **dict.fromkeys(["COCO17", "H36M17", "LSP14", "MEDIAPIPE33", "Cameras", "GroundTruth", "JointLayout",
-                     "Scene", "SceneValidationError", "get_layout", "map_joints"], ".core"),
+                     "Person", "PersonTruth", "Scene", "SceneValidationError", "get_layout", "map_joints"], ".core"),
     **dict.fromkeys(["load_scene", "read_flo", "save_scene", "write_flo"], ".data"),
     **dict.fromkeys(["SynthConfig", "make_scene"], ".synth"),
     **dict.fromkeys(["PoseRefiner", "PoseLossWeights", "KeypointRefiner", "KeypointLossWeights", "PoseData",
