@@ -12,7 +12,7 @@ from lit_boot.bootstrap import bootstrap
 from lit_boot.bootstrap.metrics_plot import history_figure
 from lit_boot.core import GroundTruth
 from lit_boot.dataset.summary import summary_rows
-from lit_boot.metrics import compute_metric_states, scene_flow_metrics, scene_metric_states
+from lit_boot.metrics import compute_metric_states, scene_flow_metrics, scene_metric_states, scene_pose_metrics
 from lit_boot.synth import SynthConfig, make_scene
 
 RANDOM_RAFT = {"weights": None, "train_updates": 2, "predict_updates": 3}  # no weights file needed
@@ -95,3 +95,19 @@ def test_the_self_check_share_of_each_persons_region():
     record = {"kept_tuned_fraction": 0.5, "person_tuned_fraction": 0.5, "regions_tuned": 1, "regions_initial": 1,
               "people": shares}  # fmt: skip
     assert "50% of the people: track 4 100%, track 9 0%; 1 of 2 background tiles" in summary_line(record)
+
+
+def test_a_person_of_the_scene_is_scored_against_their_own_truth(pair):
+    other = pair.others[0].track_id
+    alone = pair.person(1)
+    assert alone.track_id == other and alone.others == ()
+    torch.testing.assert_close(alone.gt.joints3d, pair.gt.others[0].joints3d)
+    assert [o.track_id for o in alone.gt.others] == [pair.track_id]  # the main person among the others
+    for mode, name in (("2d", "kp2d_px"), ("3d", "mpjpe_mm")):
+        assert scene_pose_metrics(alone, mode)[name] == pytest.approx(
+            scene_pose_metrics(pair, mode)[f"{name}_person{other}"], rel=1e-6)
+    flows = pair.gt.flow + 0.5
+    mine = scene_flow_metrics(alone.gt, flows, alone.track_id)
+    theirs = scene_flow_metrics(pair.gt, flows, pair.track_id)
+    assert mine[f"epe_person_person{other}"] == pytest.approx(theirs[f"epe_person_person{other}"], rel=1e-6)
+    assert mine["epe_joints"] == pytest.approx(theirs[f"epe_joints_person{other}"], rel=1e-6)

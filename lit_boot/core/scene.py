@@ -90,6 +90,19 @@ class GroundTruth:
         main = PersonTruth(int(track_ids[0]), self.joints3d, self.joints2d, self.keypoints2d, mask)
         return [main, *(by_id.get(int(i)) for i in track_ids[1:])]
 
+    def with_main(self, track_id: int, main_id: int) -> GroundTruth:
+        """This ground truth with person ``track_id`` (one of ``others``) as the main person and
+        the main one (track ``main_id``, its mask its own visible part) among the others, where it
+        was; itself when ``track_id`` has no truth here or the two do not have the same fields."""
+        new = next((o for o in self.others if o.track_id == track_id), None)
+        old = self.truths([main_id])[0]
+        fields = ("joints3d", "joints2d", "keypoints2d", "person_mask")
+        if new is None or any((getattr(new, k) is None) != (getattr(old, k) is None) for k in fields):
+            return self
+        others = tuple(old if o.track_id == track_id else o for o in self.others)
+        return dataclasses.replace(self, joints3d=new.joints3d, joints2d=new.joints2d, keypoints2d=new.keypoints2d,
+                                   others=others)  # fmt: skip
+
     def validate(self, T: int, H: int, W: int, keypoints_layout: str = "coco17") -> None:
         """Check every present field against the scene's T, H, W and keypoint layout."""
         try:
@@ -218,13 +231,18 @@ class Scene:
 
     def person(self, p: int) -> Scene:
         """A single-person scene of person ``p`` (0 = the main one, in :meth:`people` order):
-        the same frames and ground truth, that person's estimates in the main fields."""
+        the same frames, that person's estimates in the main fields, and the ground truth with
+        that person's truth as the main one (:meth:`GroundTruth.with_main`)."""
         if isinstance(p, bool) or not isinstance(p, int) or not 0 <= p < self.num_people:
             raise IndexError(f"scene {self.name!r}: person {p!r} of {self.num_people} "
                              f"(expected 0..{self.num_people - 1})")  # fmt: skip
         if p == 0 and not self.others:
             return self
-        return self.with_people([self.people()[p]])
+        person = self.people()[p]
+        alone = self.with_people([person])
+        if p == 0 or self.gt is None:
+            return alone
+        return dataclasses.replace(alone, gt=self.gt.with_main(person.track_id, self.track_id))
 
     def with_people(self, people: Sequence[Person]) -> Scene:
         """A copy with ``people`` (at least one): the first is the main person, the rest the others."""
