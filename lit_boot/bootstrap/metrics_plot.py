@@ -6,7 +6,8 @@ the unit and which direction is better. The y axis spans at least :data:`MIN_REL
 metric's size and :data:`MIN_SPAN` of its unit (:func:`y_limits`), so a change far below a
 meaningful size is drawn small instead of as a steep climb. A stage without a value leaves a gap:
 no line is drawn across it. With several people, the pooled and per-person values of a metric
-(``kp2d_px_all``, ``epe_person_person2``) are dashed lines in its panel. Rendered with Matplotlib's Agg canvas (pyplot is untouched).
+(``kp2d_px_all``, ``epe_person_person2``) are dashed lines in its panel. Rendered with
+Matplotlib's Agg canvas (pyplot is untouched).
 """
 
 from __future__ import annotations

@@ -211,7 +211,8 @@ class Bootstrap:
         person = person_region(self.models[0].sketch_masks)
         mean, check, kept = check_stage(cfg, st.scene, st.reference, mean, person)
         record = {**scene_flow_metrics(st.scene.gt, mean, st.scene.track_id),
-                  "drift_px": drift(mean, st.initial, person), "agreement_px": agreement(mean, *st.scene.pose_points(cfg.mode)),
+                  "drift_px": drift(mean, st.initial, person),
+                  "agreement_px": agreement(mean, *st.scene.pose_points(cfg.mode)),
                   "photo_error": photo_error(st.scene.frames, mean),
                   "info": {"target": reports[0], "sketch": self.models[0].hparams["sketch"]}}  # fmt: skip
         log.info(target_line(reports[0]))
@@ -281,7 +282,8 @@ class Bootstrap:
             st.initial = torch.stack(flows).mean(0)
             points = st.scene.pose_points(cfg.mode)
             record = {"stage": "initial", "kind": "initial", "cycle": 0,
-                      **scene_flow_metrics(st.scene.gt, st.initial, st.scene.track_id), **scene_pose_metrics(st.scene, cfg.mode),
+                      **scene_flow_metrics(st.scene.gt, st.initial, st.scene.track_id),
+                      **scene_pose_metrics(st.scene, cfg.mode),
                       "agreement_px": agreement(st.initial, *points), "photo_error": photo_error(st.scene.frames, st.initial),
                       "track_error": pose_track_error(st.scene.frames, *points),
                       "info": {"seconds": time.perf_counter() - start, "person_px": st.person_px}}  # fmt: skip

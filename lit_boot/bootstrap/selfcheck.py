@@ -279,7 +279,8 @@ def summary_line(record: dict) -> str:
     people = record.get("people") or []
     who = "the person,"
     if len(people) > 1:
-        who = "the people: " + ", ".join(f"track {p['track_id']} {100 * p['tuned_fraction']:.0f}%" for p in people) + ";"
+        shares = ", ".join(f"track {p['track_id']} {100 * p['tuned_fraction']:.0f}%" for p in people)
+        who = f"the people: {shares};"
     return (f"  self-check: kept the tuned flow on {100 * record['kept_tuned_fraction']:.0f}% of the pixels "
             f"({100 * record['person_tuned_fraction']:.0f}% of {who} {record['regions_tuned']} of {tiles} "
             "background tiles), the initial flow elsewhere")

@@ -13,8 +13,9 @@ to the estimates: the region the method zooms on). ``track_people(detections)`` 
 person (ids kept through crossings), and ``estimate_poses(..., people="all")`` gives each tracked
 person a pose, top-down (the main person first, the others in ``PoseEstimates.others``).
 ``estimate_people(estimator, frames, detector, people)`` runs any top-down
-:class:`PersonPoseEstimator` (``estimate_person(frames, boxes)``, ``keep_frames(estimates, keep)``;
-MediaPipe's is :class:`MediaPipeCrops`) on every tracked person. ``read_tracked_estimates(path)`` reads every person of an external COCO keypoint or DCPose file,
+:class:`PersonPoseEstimator` (``estimate_person(frames, boxes)``, ``keep_frames(estimates,
+keep)``; MediaPipe's is :class:`MediaPipeCrops`) on every tracked person.
+``read_tracked_estimates(path)`` reads every person of an external COCO keypoint or DCPose file,
 linked into tracks by the file's track ids or by the same tracker.
 """
 

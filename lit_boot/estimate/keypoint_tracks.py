@@ -19,7 +19,7 @@ import torch
 from ..data.readers import PoseEstimates, read_estimates
 from ..data.readers.estimates import detect_kind
 from ..data.readers.frame_people import keypoint_box
-from .people_track import select_people, track_people
+from .people_track import people_count, track_people
 
 __all__ = ["link_keypoint_people", "read_tracked_estimates"]
 
@@ -58,12 +58,11 @@ def read_tracked_estimates(path: str | os.PathLike, *, kind: str | None = None, 
                            **options: Any) -> PoseEstimates:  # fmt: skip
     """Every person of a COCO keypoint or DCPose file (``kind`` None: detected from the file),
     linked by the file's track ids when every detection has one, else by
-    :func:`link_keypoint_people` (a lit-boot pose file: its people as saved); ``people``: all, largest or the N most prominent. ``options`` go
-    to the reader (``image_ids``, ``image_size``, ...)."""
+    :func:`link_keypoint_people` (a lit-boot pose file: its people as saved); ``people``: all,
+    largest or the N most prominent. ``options`` go to the reader (``image_ids``, ``image_size``, ...)."""
     kind = kind or detect_kind(path)
     if kind in ("dcpose", "coco"):
         est = read_estimates(path, kind=kind, person="all", link=link_keypoint_people, **options)
     else:  # a lit-boot pose file holds its people already; METRO has one
         est = read_estimates(path, kind=None if kind == "?" else kind, **options)
-    chosen = select_people(torch.zeros(est.num_people, 0, 5), people).shape[0]
-    return est.with_people(est.people()[: max(chosen, 1)])
+    return est.with_people(est.people()[: max(people_count(people, est.num_people), 1)])

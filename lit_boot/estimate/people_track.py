@@ -28,7 +28,7 @@ import torch
 
 from .person_track import check_detections
 
-__all__ = ["track_people", "select_people", "PEOPLE_CHOICES", "parse_people"]
+__all__ = ["track_people", "select_people", "people_count", "PEOPLE_CHOICES", "parse_people"]
 
 log = logging.getLogger(__name__)
 
@@ -200,10 +200,13 @@ def parse_people(people: str | int) -> str | int:
     return people
 
 
-def select_people(tracks: torch.Tensor, people: str | int) -> torch.Tensor:
-    """The tracks (P, T, 5), most prominent first, that ``people`` asks for: all of them,
+def people_count(people: str | int, available: int) -> int:
+    """How many of ``available`` people, most prominent first, ``people`` asks for: all of them,
     the largest (the most prominent) one, or the N most prominent."""
     people = parse_people(people)
-    if people == "all":
-        return tracks
-    return tracks[: 1 if people == "largest" else people]
+    return available if people == "all" else min(available, 1 if people == "largest" else people)
+
+
+def select_people(tracks: torch.Tensor, people: str | int) -> torch.Tensor:
+    """The tracks (P, T, 5), most prominent first, that ``people`` asks for (:func:`people_count`)."""
+    return tracks[: people_count(people, tracks.shape[0])]

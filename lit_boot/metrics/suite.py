@@ -25,12 +25,12 @@ objects behind those numbers (their sum states: :mod:`lit_boot.metrics.states`).
 
 from __future__ import annotations
 
+import re
+
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 from torchmetrics import Metric
-
-import re
 
 from ..core import GroundTruth, Person, PersonTruth, Scene, get_layout, inside_image
 from .flow import EndPointError, PointEndPointError
@@ -153,7 +153,8 @@ class PoseMetrics(torch.nn.Module):
         return _values(self.points2d_metrics(name, pred, gt))
 
 
-def _flow_metric_objects(gt: GroundTruth, flows: Tensor, person: Tensor | None, joints: Tensor | None) -> dict[str, Metric]:
+def _flow_metric_objects(gt: GroundTruth, flows: Tensor, person: Tensor | None,
+                         joints: Tensor | None) -> dict[str, Metric]:  # fmt: skip
     """The updated :class:`FlowMetrics` of ``flows`` with ``person`` (T, H, W) bool as the person
     mask and ``joints`` (T, J, 2) px as the GT joints (either may be None)."""
     metrics = FlowMetrics()

@@ -58,7 +58,8 @@ def people_metrics(
     under lit-boot's names: the main person's bare, pooled ``_all`` and ``_person<id>`` with
     several people (:func:`~lit_boot.metrics.suite.people_metric_objects`)."""
     per_person = [scored.get(p, {}) for p in range(len(track_ids))]
-    return {name: float(metric.compute()) for name, metric in people_metric_objects(per_person, list(track_ids)).items()}
+    metrics = people_metric_objects(per_person, list(track_ids))
+    return {name: float(metric.compute()) for name, metric in metrics.items()}
 
 
 def unrefined_people(scene: Scene, refined: Sequence[Person], fields: Sequence[str]) -> list[Person]:

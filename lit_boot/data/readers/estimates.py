@@ -21,7 +21,8 @@ keypoint box centre is nearest the previous choice), "largest" (largest keypoint
 "score" (highest detection score, else mean keypoint confidence) read one person; "all" reads
 every person, linked into tracks by the file's ``track_id`` or by ``link``
 (:mod:`.frame_people`; :func:`lit_boot.estimate.read_tracked_estimates` passes the person
-tracker). Frames with nobody are kept as zero rows with confidence 0. 2D keypoints are COCO-17 px; frame_indices are 0..T-1.
+tracker). Frames with nobody are kept as zero rows with confidence 0. 2D keypoints are COCO-17
+px; frame_indices are 0..T-1.
 """
 
 from __future__ import annotations

@@ -171,7 +171,8 @@ def read_3dpw(
     if invalid == "drop":
         frames_idx = [t for t in frames_idx if valid[t]]
         if not frames_idx:
-            raise DatasetFormatError(f"{path}: no frame with campose_valid = 1 for every person read in the selected range")
+            raise DatasetFormatError(f"{path}: no frame with campose_valid = 1 for every person read in the "
+                                     "selected range")
     idx = np.asarray(frames_idx)
     frames, native = read_images([folder / f"image_{t:05d}.jpg" for t in frames_idx], size)
     sx, sy = scale_factors(*native, size)
