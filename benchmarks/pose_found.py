@@ -1,6 +1,8 @@
 """Frames with a person's pose on the shared Sintel windows (issue 25's first bar): MediaPipe Pose
 alone (video mode, the full-size frames) against MediaPipe with the person detector's crops where
-it missed (lit_boot.estimate.estimate_poses(detector=..., crops=True); lit_boot.estimate.crop_pose).
+it missed (lit_boot.estimate.estimate_poses(detector=..., crops=True); lit_boot.estimate.crop_pose),
+and the top-down estimator of every person (estimate_poses(detector=..., people="all"): the
+detector's tracks, MediaPipe on each one's crops; "top-down": frames where any person has a pose).
 
 A frame counts when any keypoint has a confidence above 0. The windows are
 benchmarks/real_data.py's SINTEL (every window in ../shared) and, with --heldout-root, HELDOUT.
@@ -27,15 +29,18 @@ from real_data import HELDOUT_ROOT, SHARED, SINTEL, windows
 
 
 def draw(frames: torch.Tensor, est) -> torch.Tensor:
-    """The frames (T, 3, H, W) with the keypoints that count, side by side, downscaled 2x."""
+    """The frames (T, 3, H, W) with the keypoints that count (every person's; the main one's lime,
+    the others' magenta), side by side, downscaled 2x."""
     from torchvision.utils import draw_keypoints
 
     out = []
     for t in range(frames.shape[0]):
-        keep = est.keypoints_conf[t] > 0
         image = frames[t]
-        if keep.any():
-            image = draw_keypoints(image, est.keypoints2d[t][keep][None], colors="lime", radius=4)
+        for p, person in enumerate(est.people()):
+            keep = person.keypoints_conf[t] > 0
+            if keep.any():
+                colour = "lime" if p == 0 else "magenta"
+                image = draw_keypoints(image, person.keypoints2d[t][keep][None], colors=colour, radius=4)
         out.append(image[:, ::2, ::2])
     return torch.cat(out, dim=2)
 
@@ -55,16 +60,20 @@ def main() -> None:
         frames = read_sintel(root, name, first=first, last=last, pass_name=pass_name).frames
         alone = estimate_poses(frames)
         crops = estimate_poses(frames, detector=args.detector, crops=True)
+        every = estimate_poses(frames, detector=args.detector, people="all")
+        anyone = torch.stack([p.found() for p in every.people()]).any(0)
         row = {"window": window, "frames": frames.shape[0], "mediapipe": int(alone.found().sum()),
-               "boxes": int((crops.person_boxes[:, 4] > 0).sum()), "with_crops": int(crops.found().sum())}  # fmt: skip
+               "boxes": int((crops.person_boxes[:, 4] > 0).sum()), "with_crops": int(crops.found().sum()),
+               "top_down": int(anyone.sum()), "top_down_people": every.num_people}  # fmt: skip
         rows.append(row)
         print(json.dumps(row), flush=True)
-        for tag, est in (("mediapipe", alone), ("crops", crops)):
+        for tag, est in (("mediapipe", alone), ("crops", crops), ("top_down", every)):
             write_png(Path(args.out) / f"{window}_{tag}.png", draw(frames, est))
-    total = {k: sum(r[k] for r in rows) for k in ("frames", "mediapipe", "boxes", "with_crops")}
-    print("\n| window | frames | MediaPipe alone | person boxes | MediaPipe + crops |\n| --- | --- | --- | --- | --- |")
+    total = {k: sum(r[k] for r in rows) for k in ("frames", "mediapipe", "boxes", "with_crops", "top_down")}
+    print("\n| window | frames | MediaPipe alone | person boxes | MediaPipe + crops | top-down, every person |")
+    print("| --- | --- | --- | --- | --- | --- |")
     for r in [*rows, {"window": "all", **total}]:
-        print(f"| {r['window']} | {r['frames']} | {r['mediapipe']} | {r['boxes']} | {r['with_crops']} |")
+        print(f"| {r['window']} | {r['frames']} | {r['mediapipe']} | {r['boxes']} | {r['with_crops']} | {r['top_down']} |")
     if args.json:
         Path(args.json).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
 

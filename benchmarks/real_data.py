@@ -17,7 +17,7 @@ Usage:
       [--sintel-size 218,512] [--flow '{"sketch": {"max_disagreement_px": 3}}']
       [--epochs N (default: the mode's)] [--pose-steps 1500] [--basketball-frames 16]
       [--basketball-resize 270] [--weights ../shared/checkpoints/raft-small.pth]
-      [--self-check off|photometric] [--gate] [--config JSON] [--detector PATH|none]
+      [--self-check off|photometric] [--gate] [--config JSON] [--detector PATH|none] [--estimate JSON]
       [--heldout-root ROOT] [--out /tmp/real_data] [--json out.json]
 The Sintel windows are every sample in ../shared (SINTEL); market_5's two windows are market_5
 and market_5b.
@@ -126,6 +126,8 @@ def main() -> None:
                    help="YOLOX person detector for the person's boxes ('none': MediaPipe's keypoints only)")
     p.add_argument("--flow", default="{}", help='FlowTTT options over the preset\'s, JSON: {"sketch": {"max_disagreement_px": 3}}')
     p.add_argument("--config", default="{}", help="more BootstrapConfig options, JSON (e.g. '{\"zoom\": {\"method\": \"off\"}}')")
+    p.add_argument("--estimate", default="{}",
+                   help='more estimate_poses options for the Sintel windows, JSON (e.g. \'{"crops": true}\')')
     p.add_argument("--sintel-size", default="218,512", help="H,W (the samples are 436,1024) or full")
     p.add_argument("--epochs", type=int, default=None, help="flow epochs per stage (default: 50 in 2D, 8 in 3D)")
     p.add_argument("--pose-steps", type=int, default=1500)
@@ -145,7 +147,7 @@ def main() -> None:
         for window, root, name, first, last, pass_name in (w for w in windows if w[0] in args.scenes.split(",")):
             # MediaPipe (and the detector) on the full-size frames (they miss small people), rescaled to `size`
             poses = estimate_poses(read_sintel(root, name, first=first, last=last, pass_name=pass_name),
-                                   detector=detector)  # fmt: skip
+                                   detector=detector, **json.loads(args.estimate))  # fmt: skip
             scene = poses.apply_to(read_sintel(root, name, first=first, last=last, size=size, pass_name=pass_name))
             speed, result = run(scene, Path(args.out) / window, "2d", args, video=False)
             # the detections on the GT pair's first frame, to judge them by eye (frame | GT flow | keypoints)

@@ -104,6 +104,22 @@ def test_pose_in_box():
     assert pose_in_box(kp, conf, boxes).tolist() == [True, False]
 
 
+def test_a_person_cut_off_by_the_frame_is_in_their_box():
+    """The girl of alley_1 fills the frame's lower half: MediaPipe guesses her legs far below the
+    frame (y up to 2.7 frame heights), which moved the keypoints' centre out of her box and lost
+    every frame of her (BENCHMARKS.md, "MediaPipe on the detector's crops")."""
+    H, W = 100, 200
+    upper = [[80.0, 40.0], [120.0, 40.0], [85.0, 90.0], [115.0, 90.0]]  # shoulders, hips: in the frame
+    legs = [[85.0, 180.0], [115.0, 180.0], [85.0, 270.0], [115.0, 270.0]]  # knees, ankles: below it
+    kp, conf = torch.tensor([upper + legs]), torch.ones(1, 8)
+    box = torch.tensor([[70.0, 30.0, 130.0, 99.0, 0.9]])
+    assert not pose_in_box(kp, conf, box)[0]  # every keypoint: the centre (y 155) lies below the box
+    assert pose_in_box(kp, conf, box, (H, W))[0]
+    neighbour = kp + torch.tensor([90.0, 0.0])  # someone else, beside the box
+    assert not pose_in_box(neighbour, conf, box, (H, W))[0]
+    assert not pose_in_box(kp + torch.tensor([0.0, 200.0]), conf, box, (H, W))[0]  # no keypoint in the frame
+
+
 @pytest.mark.shared
 @pytest.mark.mediapipe
 @needs_mediapipe

@@ -6,8 +6,8 @@ the N most prominent) and runs MediaPipe Pose (static-image mode) on square crop
 track's box in every frame it has one (:func:`~.crop_pose.crop_landmarks`, the framings of
 :data:`~.crop_pose.CROP_ATTEMPTS` in turn). A crop may show a neighbour more clearly than the
 track's person: a pose counts for the track only where the centre of its confident keypoints'
-box lies inside the track's box (else the frame has confidence 0 for that person, counted in
-``metadata["people"][i]["not_theirs"]``). A track on which no pose is found in any frame is left
+box (those inside the frame) lies inside the track's box (else the frame has confidence 0 for
+that person, counted in ``metadata["people"][i]["not_theirs"]``). A track on which no pose is found in any frame is left
 out (``metadata["people_without_pose"]``). Person 0 (the main person) is the most prominent
 track with a pose; track ids number the tracks by prominence. Another estimator plugs in through
 :class:`PersonPoseEstimator` (two methods); MediaPipe is :class:`MediaPipeCrops`.
@@ -28,10 +28,17 @@ from .tracking import body_box
 __all__ = ["estimate_people", "pose_in_box", "PersonPoseEstimator", "MediaPipeCrops", "mask_frames"]
 
 
-def pose_in_box(keypoints: torch.Tensor, conf: torch.Tensor, boxes: torch.Tensor) -> torch.Tensor:
+def pose_in_box(keypoints: torch.Tensor, conf: torch.Tensor, boxes: torch.Tensor,
+                size: tuple[int, int] | None = None) -> torch.Tensor:  # fmt: skip
     """(T,) bool: frames whose confident keypoints (T, K, 2) px, conf (T, K), have their box's
-    centre inside ``boxes`` (T, 5) (x0, y0, x1, y1, score > 0)."""
+    centre inside ``boxes`` (T, 5) (x0, y0, x1, y1, score > 0). With the frames' ``size`` (H, W),
+    only the keypoints inside the frame count: a person cut off by the frame's edge has limbs
+    guessed beyond it, which would move the centre out of their own box."""
     inside = torch.zeros(keypoints.shape[0], dtype=torch.bool)
+    if size is not None:
+        H, W = size
+        in_frame = (keypoints[..., 0] >= -0.5) & (keypoints[..., 0] <= W - 0.5)
+        conf = conf * (in_frame & (keypoints[..., 1] >= -0.5) & (keypoints[..., 1] <= H - 0.5)).to(conf)
     for t in range(keypoints.shape[0]):
         if (conf[t] > 0).any() and boxes[t, 4] > 0:
             (cx, cy), _ = body_box(keypoints[t], conf[t])
@@ -97,7 +104,7 @@ class MediaPipeCrops:
 def _one_person(estimator: PersonPoseEstimator, frames: torch.Tensor, boxes: torch.Tensor) -> tuple[PoseEstimates, int]:
     """The estimates of the person in ``boxes`` (T, 5), and how many crops showed someone else."""
     est = estimator.estimate_person(frames, boxes)
-    others = est.found() & ~pose_in_box(est.keypoints2d, est.keypoints_conf, boxes)
+    others = est.found() & ~pose_in_box(est.keypoints2d, est.keypoints_conf, boxes, tuple(frames.shape[2:]))
     if not bool(others.any()):
         return est, 0
     return estimator.keep_frames(est, ~others), int(others.sum())
