@@ -10,8 +10,8 @@ and motions below, 8 frames, 128x256, the default preset (3D or ``--mode 2d``).
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/people_synth.py [--mode 3d|2d] [--people 2,3] [--seeds 30,31]
-      [--variants every,main] [--flow '{"people_balance": true}'] [--weights ../shared/checkpoints/raft-small.pth] [--out /tmp/people_synth]
-      [--json out.json]
+      [--variants every,main] [--flow '{"people_balance": true}'] [--weights ../shared/checkpoints/raft-small.pth]
+      [--out /tmp/people_synth] [--json out.json]
 """
 
 from __future__ import annotations
@@ -69,8 +69,8 @@ def main() -> None:
                 out = Path(args.out) / f"p{n}_s{seed}_{variant.split()[0]}"
                 shutil.rmtree(out, ignore_errors=True)
                 start = time.perf_counter()
-                result = bootstrap(run_scene, out, mode=args.mode, flow={"weights": args.weights, **json.loads(args.flow)}, progress_bar=False,
-                                   video=False)  # fmt: skip
+                flow = {"weights": args.weights, **json.loads(args.flow)}
+                result = bootstrap(run_scene, out, mode=args.mode, flow=flow, progress_bar=False, video=False)
                 seconds = time.perf_counter() - start
                 gt = scene.gt.flow
                 row = {"people": n, "seed": seed, "variant": variant, "seconds": round(seconds, 1),

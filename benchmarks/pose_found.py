@@ -73,7 +73,8 @@ def main() -> None:
     print("\n| window | frames | MediaPipe alone | person boxes | MediaPipe + crops | top-down, every person |")
     print("| --- | --- | --- | --- | --- | --- |")
     for r in [*rows, {"window": "all", **total}]:
-        print(f"| {r['window']} | {r['frames']} | {r['mediapipe']} | {r['boxes']} | {r['with_crops']} | {r['top_down']} |")
+        cells = (r[k] for k in ("window", "frames", "mediapipe", "boxes", "with_crops", "top_down"))
+        print("| " + " | ".join(str(c) for c in cells) + " |")
     if args.json:
         Path(args.json).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
 

@@ -51,7 +51,8 @@ def main() -> None:
     for mode in ("3d", "2d"):
         flows = float((new[mode]["flows"] - old[mode]["flows"]).abs().max())
         poses = float((new[mode]["poses"] - old[mode]["poses"]).abs().max())
-        print(f"{mode}: final flows differ by at most {flows:.3g} px, poses by {poses:.3g} ({'mm' if mode == '3d' else 'px'})")
+        unit = "mm" if mode == "3d" else "px"
+        print(f"{mode}: final flows differ by at most {flows:.3g} px, poses by {poses:.3g} ({unit})")
 
 
 if __name__ == "__main__":

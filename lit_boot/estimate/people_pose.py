@@ -7,8 +7,8 @@ track's box in every frame it has one (:func:`~.crop_pose.crop_landmarks`, the f
 :data:`~.crop_pose.CROP_ATTEMPTS` in turn). A crop may show a neighbour more clearly than the
 track's person: a pose counts for the track only where the centre of its confident keypoints'
 box (those inside the frame) lies inside the track's box (else the frame has confidence 0 for
-that person, counted in ``metadata["people"][i]["not_theirs"]``). A track on which no pose is found in any frame is left
-out (``metadata["people_without_pose"]``). Person 0 (the main person) is the most prominent
+that person, counted in ``metadata["people"][i]["not_theirs"]``). A track on which no pose is
+found in any frame is left out (``metadata["people_without_pose"]``). Person 0 (the main person) is the most prominent
 track with a pose; track ids number the tracks by prominence. Another estimator plugs in through
 :class:`PersonPoseEstimator` (two methods); MediaPipe is :class:`MediaPipeCrops`.
 """
@@ -20,6 +20,7 @@ from typing import Any, Protocol
 
 import torch
 
+from ..core.cameras import inside_image
 from ..core.people import Person
 from ..data.readers.pose_file import PoseEstimates
 from .people_track import select_people, track_people
@@ -36,9 +37,7 @@ def pose_in_box(keypoints: torch.Tensor, conf: torch.Tensor, boxes: torch.Tensor
     guessed beyond it, which would move the centre out of their own box."""
     inside = torch.zeros(keypoints.shape[0], dtype=torch.bool)
     if size is not None:
-        H, W = size
-        in_frame = (keypoints[..., 0] >= -0.5) & (keypoints[..., 0] <= W - 0.5)
-        conf = conf * (in_frame & (keypoints[..., 1] >= -0.5) & (keypoints[..., 1] <= H - 0.5)).to(conf)
+        conf = conf * inside_image(keypoints, *size).to(conf)
     for t in range(keypoints.shape[0]):
         if (conf[t] > 0).any() and boxes[t, 4] > 0:
             (cx, cy), _ = body_box(keypoints[t], conf[t])
