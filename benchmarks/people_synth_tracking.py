@@ -10,7 +10,8 @@ definition). Scenes: make_scene(people=N, frames=--frames, 128x256), seeds and m
 the other people walk across, crossing and occluding person 0.
 
 Usage: python benchmarks/people_synth_tracking.py [--people 2,3] [--seeds 30,31,32,33]
-           [--frames 16] [--jitter 0.05] [--miss 0.1] [--smoothing 0.5] [--json out.json]
+           [--frames 16] [--jitter 0.05] [--miss 0.1] [--smoothing 0.5] [--keypoints]
+           [--keypoint-weight 1] [--json out.json]
 """
 
 from __future__ import annotations
@@ -27,10 +28,13 @@ from lit_boot.synth import make_scene
 MOTIONS = ("walk", "run", "wave")
 
 
-def detections_of(scene, jitter: float, miss: float, g: torch.Generator) -> tuple[list[torch.Tensor], list[list[int]]]:
-    """Each frame's noisy, shuffled detections (N_t, 5) and the true person of each."""
+def detections_of(scene, jitter: float, miss: float,
+                  g: torch.Generator) -> tuple[list[torch.Tensor], list[list[int]], list[torch.Tensor]]:  # fmt: skip
+    """Each frame's noisy, shuffled detections (N_t, 5), the true person of each, and each one's
+    keypoints (N_t, K, 3): the person's simulated 2D estimates (x, y px, confidence)."""
     boxes = torch.stack([p.person_boxes for p in scene.people()])  # (P, T, 5)
-    dets, who = [], []
+    poses = torch.stack([torch.cat([p.keypoints2d, p.keypoints_conf[..., None]], -1) for p in scene.people()])
+    dets, who, kps = [], [], []
     for t in range(boxes.shape[1]):
         rows, owners = [], []
         for p in range(boxes.shape[0]):
@@ -45,7 +49,8 @@ def detections_of(scene, jitter: float, miss: float, g: torch.Generator) -> tupl
         order = torch.randperm(len(rows), generator=g).tolist()
         dets.append(torch.stack([rows[i] for i in order]) if rows else torch.zeros(0, 5))
         who.append([owners[i] for i in order])
-    return dets, who
+        kps.append(poses[[owners[i] for i in order], t].reshape(len(order), poses.shape[2], 3))
+    return dets, who, kps
 
 
 def score(tracks: torch.Tensor, dets: list[torch.Tensor], who: list[list[int]], visible: torch.Tensor) -> list[dict]:
@@ -76,6 +81,8 @@ def main() -> None:
     parser.add_argument("--jitter", type=float, default=0.05)
     parser.add_argument("--miss", type=float, default=0.1)
     parser.add_argument("--smoothing", type=float, default=None, help="track_people's smoothing (default: its own)")
+    parser.add_argument("--keypoints", action="store_true", help="give the tracker each detection's keypoints")
+    parser.add_argument("--keypoint-weight", type=float, default=None, help="track_people's keypoint_weight")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     print("| scene | person: visible frames, covered, identity switches | tracks |")
@@ -86,8 +93,10 @@ def main() -> None:
             scene = make_scene(frames=args.frames, height=128, width=256, motion=MOTIONS[i % len(MOTIONS)], seed=seed,
                                people=n)  # fmt: skip
             g = torch.Generator().manual_seed(seed)
-            dets, who = detections_of(scene, args.jitter, args.miss, g)
-            tracks = track_people(dets, **({} if args.smoothing is None else {"smoothing": args.smoothing}))
+            dets, who, kps = detections_of(scene, args.jitter, args.miss, g)
+            options = {"smoothing": args.smoothing, "keypoint_weight": args.keypoint_weight}
+            tracks = track_people(dets, keypoints=kps if args.keypoints else None,
+                                  **{k: v for k, v in options.items() if v is not None})  # fmt: skip
             visible = torch.stack([p.person_boxes[:, 4] > 0 for p in scene.people()])
             rows = score(tracks, dets, who, visible)
             out.append({"people": n, "seed": seed, "tracks": int(tracks.shape[0]), "rows": rows})

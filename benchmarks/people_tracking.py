@@ -2,7 +2,8 @@
 lit_boot.estimate.track_people, per track the frames it covers, and contact sheets with each
 track's id and colour drawn on sampled frames (judge identity switches and missed people by eye).
 With --poses, also MediaPipe Pose alone (the default estimator) against every tracked person's
-pose (estimate_poses(people="all"), top-down), with their wall times.
+pose (estimate_poses(people="all"), top-down, tracked by boxes and keypoints), with their wall
+times, and a contact sheet of those people (<video>_people.png).
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/people_tracking.py [--videos basketball,football,street]
@@ -44,8 +45,9 @@ def sheet(frames: torch.Tensor, tracks: torch.Tensor, picks: list[int]) -> torch
     return torch.cat(out, dim=2)
 
 
-def poses(frames: torch.Tensor, detector: PersonDetector) -> dict:
-    """MediaPipe alone against every tracked person's pose: frames with a pose, seconds."""
+def poses(frames: torch.Tensor, detector: PersonDetector) -> tuple[dict, torch.Tensor]:
+    """MediaPipe alone against every tracked person's pose: frames with a pose, seconds; and the
+    people's boxes (P, T, 5) (the top-down estimator's tracks, linked by boxes and keypoints)."""
     from lit_boot.estimate import estimate_poses
 
     t0 = time.perf_counter()
@@ -53,11 +55,12 @@ def poses(frames: torch.Tensor, detector: PersonDetector) -> dict:
     t1 = time.perf_counter()
     every = estimate_poses(frames, people="all", detector=detector)
     t2 = time.perf_counter()
+    boxes = torch.stack([p.person_boxes for p in every.people()]) if every.person_boxes is not None else None
     return {"default_s": t1 - t0, "default_pose_frames":
             int(one.found().sum()), "people_s": t2 - t1, "people": every.num_people,
             "pose_frames_per_person": [int((p.keypoints_conf > 0).any(-1).sum()) for p in every.people()],
             "not_theirs": [r["not_theirs"] for r in every.metadata["people"]],
-            "tracks_without_pose": every.metadata["people_without_pose"]}  # fmt: skip
+            "tracks_without_pose": every.metadata["people_without_pose"]}, boxes  # fmt: skip
 
 
 def main() -> None:
@@ -87,7 +90,10 @@ def main() -> None:
                      "detections_per_frame": sum(len(d) for d in detections) / T, "tracks": len(tracks),
                      "frames_per_track": covered, "detect_s_per_frame": detect_s / T, "track_s": track_s})  # fmt: skip
         if args.poses:
-            rows[-1] |= poses(frames, detector)
+            found, people = poses(frames, detector)
+            rows[-1] |= found
+            if people is not None:  # each person with a pose, in its track's colour (ids: people order)
+                write_png(args.out / f"{name}_people.png", sheet(frames, people, picks))
         print(json.dumps(rows[-1]))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))

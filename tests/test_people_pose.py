@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from lit_boot.estimate.mediapipe_pose import poses_from_landmarks
-from lit_boot.estimate.people_pose import MediaPipeCrops, estimate_people, mask_frames, pose_in_box
+from lit_boot.estimate.people_pose import MediaPipeCrops, detection_keypoints, estimate_people, mask_frames, pose_in_box
 from test_estimate_mediapipe import _world, needs_mediapipe
 
 H, W = 120, 200
@@ -80,6 +80,35 @@ def test_each_tracked_person_gets_the_pose_found_in_their_box():
     records = est.metadata["people"]
     assert [r["not_theirs"] for r in records] == [0, 1] and [r["pose_frames"] for r in records] == [4, 3]
     assert est.metadata["run"] == 1 and est.cameras is not None and est.others[0].cameras is not None
+
+
+class Counting(StandingAtTheBrightest):
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls = 0
+
+    def process(self, image):
+        self.calls += 1
+        return super().process(image)
+
+
+def test_each_detection_gets_its_pose_and_each_crop_runs_once():
+    frames, detector = two_people()
+    pose = Counting()
+    estimator = MediaPipeCrops(pose, assemble(frames))
+    keypoints = detection_keypoints(estimator, frames, detector.detect_frames(frames))
+    assert [tuple(k.shape) for k in keypoints] == [(2, 17, 3)] * 4
+    hips = torch.stack([k[:, 11:13, :2].mean(1) for k in keypoints])  # (T, 2 detections, 2)
+    assert torch.allclose(hips[:3], torch.tensor([[40.0, 60.0], [150.0, 70.0]]).expand(3, 2, 2), atol=1.0)
+    assert (keypoints[3][1, :, 2] == 0).all() and (keypoints[3][0, :, 2] > 0).all()  # B's crop: the neighbour
+    assert pose.calls == 8  # every detection's crop, each found by the first framing
+    est = estimate_people(estimator, frames, detector, "all")
+    assert pose.calls == 8 and est.num_people == 2  # the same estimator and frames: every crop seen
+    again = MediaPipeCrops(pose, assemble(frames))
+    estimate_people(again, frames, detector, "all")
+    assert pose.calls == 16  # the tracks' crops are the detections': MediaPipe ran once per crop
+    estimate_people(again, frames.clone(), detector, "all")
+    assert pose.calls == 24  # other frames: run again
 
 
 def test_people_largest_or_one_keeps_the_most_prominent_and_a_track_without_a_pose_is_left_out():

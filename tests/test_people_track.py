@@ -125,26 +125,60 @@ def test_a_good_match_is_not_traded_for_two_poor_ones():
     assert tracks.shape[0] == 2 and (tracks[1, 3, 4] == 0) and (tracks[1, 1:3, 4] > 0).all()
 
 
-def test_a_synthetic_crossing_keeps_both_ids():
-    """Two people of a synthetic scene cross (the far one hidden behind the near one, its box
-    shrinking to its visible part); the true boxes, in a shuffled order: each track follows one
-    person, and each person is one track (with smoothing 0.5 the hidden one split in three)."""
+def synthetic_crossing(seed: int, motion: str = "walk"):
+    """Two people of a synthetic scene who cross (the far one hidden behind the near one, its
+    box shrinking to its visible part): their true boxes as detections, shuffled in each frame,
+    each one's simulated keypoints (x, y, confidence), and the true person of each detection."""
     from lit_boot.synth import make_scene
 
-    scene = make_scene(frames=16, height=128, width=256, motion="walk", seed=30, people=2)
+    scene = make_scene(frames=16, height=128, width=256, motion=motion, seed=seed, people=2)
     boxes = torch.stack([p.person_boxes for p in scene.people()])  # (2, T, 5)
+    poses = torch.stack([torch.cat([p.keypoints2d, p.keypoints_conf[..., None]], -1) for p in scene.people()])
     g = torch.Generator().manual_seed(0)
-    dets, owners = [], []
+    dets, keypoints, owners = [], [], []
     for t in range(boxes.shape[1]):
         order = torch.randperm(2, generator=g).tolist()
         dets.append(boxes[order, t])
+        keypoints.append(poses[order, t])
         owners.append(order)
+    return dets, keypoints, owners
+
+
+def followed(tracks: torch.Tensor, dets: list[torch.Tensor], owners: list[list[int]]) -> list[set[int]]:
+    """The true people each track covers, over the frames where its box is a detection."""
+    return [{owners[t][int((dets[t] == track[t]).all(-1).nonzero()[0])] for t in range(len(dets))
+             if track[t, 4] > 0 and (dets[t] == track[t]).all(-1).any()} for track in tracks]  # fmt: skip
+
+
+def test_a_synthetic_crossing_keeps_both_ids():
+    """Each track follows one person, and each person is one track (with smoothing 0.5 the
+    hidden one split in three)."""
+    dets, _, owners = synthetic_crossing(30)
     for smoothing, whole in ((0.1, True), (0.5, False)):
-        tracks = track_people(dets, smoothing=smoothing)
-        followed = []
-        for track in tracks:
-            who = {owners[t][int((dets[t] == track[t]).all(-1).nonzero()[0])] for t in range(len(dets))
-                   if track[t, 4] > 0 and (dets[t] == track[t]).all(-1).any()}  # fmt: skip
-            followed.append(who)
-        assert all(len(w) == 1 for w in followed)
-        assert (len(tracks) == 2 and sorted(min(w) for w in followed) == [0, 1]) == whole
+        who = followed(track_people(dets, smoothing=smoothing), dets, owners)
+        assert all(len(w) == 1 for w in who)
+        assert (len(who) == 2 and sorted(min(w) for w in who) == [0, 1]) == whole
+
+
+def test_keypoints_keep_the_ids_where_the_boxes_alone_switch():
+    """Seed 40: in frames 1-3 the far person's box lies inside the near one's, before either
+    track has a velocity; by the boxes alone the two tracks swap people there. Each detection's
+    keypoints (joints moved on by the track's velocity against the detection's) tell them apart."""
+    dets, keypoints, owners = synthetic_crossing(40)
+    boxes_only = followed(track_people(dets), dets, owners)
+    assert any(len(w) > 1 for w in boxes_only)  # a track that covers both people: a switch
+    assert followed(track_people(dets, keypoints=keypoints, keypoint_weight=0), dets, owners) == boxes_only
+    with_pose = followed(track_people(dets, keypoints=keypoints), dets, owners)
+    assert sorted(with_pose, key=min) == [{0}, {1}]
+
+
+def test_keypoints_are_checked_against_the_detections():
+    dets, keypoints, _ = synthetic_crossing(40)
+    with pytest.raises(ValueError, match=r"keypoints\[2\]: expected \(2, 17, 3\)"):
+        track_people(dets, keypoints=keypoints[:2] + [keypoints[2][:1]] + keypoints[3:])
+    with pytest.raises(ValueError, match="keypoints: expected one tensor per frame"):
+        track_people(dets, keypoints=keypoints[:3])
+    with pytest.raises(ValueError, match="keypoint_weight: expected"):
+        track_people(dets, keypoints=keypoints, keypoint_weight=-1)
+    empty = [torch.zeros(0, 5)] + dets[1:]
+    assert track_people(empty, keypoints=[torch.zeros(0, 0, 3)] + keypoints[1:]).shape[0] == 2

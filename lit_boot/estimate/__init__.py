@@ -46,7 +46,14 @@ from .mediapipe_pose import (
     summary_line,
 )
 from .keypoint_tracks import link_keypoint_people, read_tracked_estimates
-from .people_pose import MediaPipeCrops, PersonPoseEstimator, estimate_people, mask_frames, pose_in_box
+from .people_pose import (
+    MediaPipeCrops,
+    PersonPoseEstimator,
+    detection_keypoints,
+    estimate_people,
+    mask_frames,
+    pose_in_box,
+)
 from .people_track import PEOPLE_CHOICES, parse_people, select_people, track_people
 from .person_track import main_person_boxes, person_boxes
 from .tracking import JUMP_POLICIES, drop_jumps, find_jumps
@@ -91,6 +98,7 @@ __all__ = [
     "resolve_detector_weights",
     "main_person_boxes",
     "estimate_people",
+    "detection_keypoints",
     "pose_in_box",
     "PEOPLE_CHOICES",
     "parse_people",

@@ -2,8 +2,8 @@
 OpenPose; DCPose), linked into tracks by the person tracker when the file has no track ids.
 
 :func:`link_keypoint_people` boxes each detection's keypoints (those with confidence > 0) and runs
-:func:`~.people_track.track_people` on the boxes (an optimal assignment on velocity-predicted
-boxes: ids kept through crossings); :func:`read_tracked_estimates` reads a file with every
+:func:`~.people_track.track_people` on the boxes and the keypoints (an optimal assignment on
+velocity-predicted boxes and joints: ids kept through crossings); :func:`read_tracked_estimates` reads a file with every
 person this way (``lit_boot.data.readers.read_estimates(person="all", link=...)``).
 """
 
@@ -30,19 +30,21 @@ def link_keypoint_people(people: Sequence[Sequence[np.ndarray]], scores: Sequenc
     index of its track (most prominent first) or -1 (no keypoint found, or a stray detection the
     tracker dropped). ``scores``: detection scores (default: the mean keypoint confidence);
     ``tracker``: :func:`~.people_track.track_people` options."""
-    detections, index = [], []
+    detections, keypoints, index = [], [], []
     for t, frame in enumerate(people):
-        rows, kept = [], []
+        rows, poses, kept = [], [], []
         for i, p in enumerate(frame):
             box = keypoint_box(np.asarray(p, dtype=np.float64))
             if box is None:
                 continue
             score = scores[t][i] if scores is not None else float(np.clip(p[p[:, 2] > 0, 2], 0, 1).mean())
             rows.append([*box, min(max(float(score), 1e-3), 1.0)])
+            poses.append(torch.as_tensor(np.asarray(p, dtype=np.float32)))
             kept.append(i)
         detections.append(torch.tensor(rows, dtype=torch.float32).reshape(-1, 5))
+        keypoints.append(torch.stack(poses) if poses else torch.zeros(0, 0, 3))
         index.append(kept)
-    tracks = track_people(detections, **tracker)
+    tracks = track_people(detections, keypoints=keypoints, **tracker)
     labels = [[-1] * len(frame) for frame in people]
     for p, track in enumerate(tracks):
         for t, box in enumerate(track):

@@ -1,12 +1,14 @@
 """Every person's pose, top-down: the person detector's tracks, MediaPipe Pose on each one's crops.
 
-:func:`estimate_people` runs the detector on every frame, links the boxes into tracks
-(:func:`~.people_track.track_people`), keeps the ones ``people`` asks for (all, the largest, or
-the N most prominent) and runs MediaPipe Pose (static-image mode) on square crops around each
-track's box in every frame it has one (:func:`~.crop_pose.crop_landmarks`, the framings of
-:data:`~.crop_pose.CROP_ATTEMPTS` in turn). A crop may show a neighbour more clearly than the
-track's person: a pose counts for the track only where the centre of its confident keypoints'
-box (those inside the frame) lies inside the track's box (else the frame has confidence 0 for
+:func:`estimate_people` runs the detector on every frame, MediaPipe Pose (static-image mode) on
+square crops around each detection (:func:`~.crop_pose.crop_landmarks`, the framings of
+:data:`~.crop_pose.CROP_ATTEMPTS` in turn; :func:`detection_keypoints`), links the boxes into
+tracks by their overlap and their keypoints (:func:`~.people_track.track_people`: who is who
+where two boxes overlap), keeps the ones ``people`` asks for (all, the largest, or the N most
+prominent) and gives each track the poses of its boxes (the crops of the frames it bridges are
+run then; :class:`MediaPipeCrops` runs each crop once). A crop may show a neighbour more clearly
+than the detection's person: a pose counts for it only where the centre of its confident
+keypoints' box (those inside the frame) lies inside the box (else the frame has confidence 0 for
 that person, counted in ``metadata["people"][i]["not_theirs"]``). A track on which no pose is
 found in any frame is left out (``metadata["people_without_pose"]``). Person 0 (the main person) is the most prominent
 track with a pose; track ids number the tracks by prominence. Another estimator plugs in through
@@ -26,7 +28,8 @@ from ..data.readers.pose_file import PoseEstimates
 from .people_track import select_people, track_people
 from .tracking import body_box
 
-__all__ = ["estimate_people", "pose_in_box", "PersonPoseEstimator", "MediaPipeCrops", "mask_frames"]
+__all__ = ["estimate_people", "detection_keypoints", "pose_in_box", "PersonPoseEstimator", "MediaPipeCrops",
+           "mask_frames"]
 
 
 def pose_in_box(keypoints: torch.Tensor, conf: torch.Tensor, boxes: torch.Tensor,
@@ -73,21 +76,41 @@ class MediaPipeCrops:
     ``assemble(landmarks, confidence, world, found)`` from MediaPipe-33 arrays
     (:func:`~.mediapipe_pose.poses_from_landmarks` with the run's options); ``keep_frames`` makes
     them again from the same landmarks (the 3D fill-in and the cameras then ignore the dropped
-    frames), so MediaPipe runs once per person."""
+    frames). MediaPipe runs once per crop: a box already seen in that frame (of the same frames)
+    reuses its landmarks."""
 
     def __init__(self, pose: Any, assemble: Any):
         self.pose, self.assemble = pose, assemble
         self._raw: tuple[PoseEstimates, dict[str, torch.Tensor], torch.Tensor] | None = None
+        self._frames: torch.Tensor | None = None
+        self._seen: dict[tuple[int, tuple[float, ...]], dict[str, torch.Tensor]] = {}
+
+    def _crops(self, frames: torch.Tensor, boxes: torch.Tensor) -> dict[str, torch.Tensor]:
+        """:func:`~.crop_pose.crop_landmarks` on the boxes (T, 5), each (frame, box) run once."""
+        from .crop_pose import crop_landmarks
+
+        if frames is not self._frames:
+            self._frames, self._seen = frames, {}
+        keys = [(t, tuple(boxes[t, :4].tolist())) for t in range(boxes.shape[0])]
+        todo = boxes[:, 4] > 0
+        new = todo & torch.tensor([k not in self._seen for k in keys], dtype=torch.bool)
+        raw = crop_landmarks(self.pose, frames, boxes, new)
+        for t in torch.nonzero(todo).flatten().tolist():
+            if new[t]:
+                self._seen[keys[t]] = {name: value[t].clone() for name, value in raw.items()}
+            else:
+                for name, value in self._seen[keys[t]].items():
+                    raw[name][t] = value
+        return raw
 
     def estimate_person(self, frames: torch.Tensor, boxes: torch.Tensor) -> PoseEstimates:
-        from .crop_pose import crop_landmarks
         from .world_to_lsp import landmark_confidence
 
         if not bool((boxes[:, 4] > 0).any()):  # nobody: no crop to run MediaPipe on
             T = frames.shape[0]
             return self.assemble(torch.zeros(T, 33, 2), torch.zeros(T, 33), torch.zeros(T, 33, 3),
                                  torch.zeros(T, dtype=torch.bool))  # fmt: skip
-        raw = crop_landmarks(self.pose, frames, boxes, boxes[:, 4] > 0)
+        raw = self._crops(frames, boxes)
         conf = landmark_confidence(raw["visibility"], raw["presence"])
         est = self.assemble(raw["landmarks"], conf, raw["world"], raw["found"])
         self._raw = (est, raw, conf)
@@ -109,6 +132,26 @@ def _one_person(estimator: PersonPoseEstimator, frames: torch.Tensor, boxes: tor
     return estimator.keep_frames(est, ~others), int(others.sum())
 
 
+def detection_keypoints(estimator: PersonPoseEstimator, frames: torch.Tensor,
+                        detections: list[torch.Tensor]) -> list[torch.Tensor]:  # fmt: skip
+    """Each detection's pose: per frame (N_t, K, 3) x, y px, confidence (0 where no pose was
+    found, or where the crop's pose is a neighbour's: :func:`pose_in_box`), from ``estimator``
+    on frames (T, 3, H, W) and the per-frame detections (N_t, 5); one estimator call per
+    detection slot (the i-th detection of every frame)."""
+    T, size = frames.shape[0], tuple(frames.shape[2:])
+    rows: list[list[torch.Tensor]] = [[] for _ in range(T)]
+    for i in range(max((d.shape[0] for d in detections), default=0)):
+        boxes = torch.stack([d[i] if d.shape[0] > i else torch.zeros(5) for d in detections])
+        est = estimator.estimate_person(frames, boxes)
+        conf = est.keypoints_conf * pose_in_box(est.keypoints2d, est.keypoints_conf, boxes, size)[:, None]
+        poses = torch.cat([est.keypoints2d, conf[..., None]], -1)
+        for t in range(T):
+            if detections[t].shape[0] > i:
+                rows[t].append(poses[t])
+    K = next((r[0].shape[0] for r in rows if r), 0)
+    return [torch.stack(r) if r else torch.zeros(0, K, 3) for r in rows]
+
+
 def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detector: Any, people: str | int,
                     meta: dict[str, Any] | None = None) -> PoseEstimates:  # fmt: skip
     """Every tracked person's estimates in frames (T, 3, H, W) uint8 RGB (module docstring).
@@ -118,7 +161,9 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
     :class:`~.detector.PersonDetector`; ``meta``: the run's own metadata, merged into the main
     person's. Returns the main person's estimates with the others in ``others``; with no pose
     found, the confidences are 0 everywhere (and the most prominent track's boxes are kept, if any)."""
-    tracks = select_people(track_people(detector.detect_frames(frames)), people)
+    detections = [torch.as_tensor(d, dtype=torch.float32).reshape(-1, 5) for d in detector.detect_frames(frames)]
+    keypoints = detection_keypoints(estimator, frames, detections)
+    tracks = select_people(track_people(detections, keypoints=keypoints), people)
     estimates, records = [], []
     for track_id, boxes in enumerate(tracks):
         est, not_theirs = _one_person(estimator, frames, boxes)

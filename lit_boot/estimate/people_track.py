@@ -1,19 +1,22 @@
 """Every person followed over a video's detections: tracks whose ids hold through crossings.
 
 :func:`track_people` links each frame's detections to the open tracks by an optimal assignment
-(scipy's ``linear_sum_assignment``) on a cost from each track's *predicted* box: its last box
-moved on by the track's velocity (px per frame, a running mean of its centre's motion, each
-frame weighing ``smoothing``), so that
-two people who cross keep their ids. The cost of a detection for a track is ``1 - IoU`` with the
-predicted box when they overlap by at least ``min_iou``, else ``1 + d / reach`` when the centres
-are ``d`` px apart within ``reach`` = ``max_jump`` x the box's larger side x the frames since it
-was last seen; a detection further away, or more than ``max_scale`` times larger or smaller
-(larger side), is not that track's. Leaving a track or a detection unmatched costs
-:data:`MISS_COST` each, so a good match is never traded for two poor ones. A track not seen for more than ``max_gap`` frames ends; an
-unmatched detection starts a new track. Tracks seen in fewer than ``min_frames`` frames (capped
-at T) are dropped (a stray detection), gaps of at most ``max_gap`` frames are bridged by linear
-interpolation of the box and score, and the tracks are ordered by prominence (the sum over
-frames of box area x score): person 0 is the most prominent. Boxes are x0, y0, x1, y1 px with
+(scipy's ``linear_sum_assignment``) on a cost from each track's *predicted* box: its last box moved
+on by the track's velocity (px per frame, a running mean of its centre's motion, each frame
+weighing ``smoothing``), so that two people who cross keep their ids. The cost of a detection for
+a track is ``1 - IoU`` with the predicted box when they overlap by at least ``min_iou``, else
+``1 + d / reach`` when the centres are ``d`` px apart within ``reach`` = ``max_jump`` x the box's larger
+side x the frames since it was last seen; a detection further away, or more than ``max_scale``
+times larger or smaller (larger side), is not that track's. Where the detections come with
+keypoints (each one's pose), the median distance of the shared confident joints from the track's
+last keypoints moved on by its velocity, in box sides (at most 1), x ``keypoint_weight`` is added:
+where one person's box lies inside another's during a crossing, the joints still say who is who.
+Leaving a track or a detection unmatched costs :data:`MISS_COST` each, so a good match is never
+traded for two poor ones. A track not seen for more than ``max_gap`` frames ends; an unmatched
+detection starts a new track. Tracks seen in fewer than ``min_frames`` frames (capped at T) are
+dropped (a stray detection), gaps of at most ``max_gap`` frames are bridged by linear interpolation
+of the box and score, and the tracks are ordered by prominence (the sum over frames of box area x
+score): person 0 is the most prominent. Boxes are x0, y0, x1, y1 px with
 pixel centres at integer coordinates (:mod:`.detector`).
 """
 
@@ -39,6 +42,13 @@ MISS_COST = 1.0
 SMOOTHING = 0.1
 #: The named choices of ``people`` (or a number N >= 1: the N most prominent).
 PEOPLE_CHOICES = ("all", "largest")
+#: The weight of the keypoint distance (in box sides, at most 1) in a pair's cost, where the
+#: detections come with keypoints (BENCHMARKS.md, "The tracker on synthetic crossings").
+KEYPOINT_WEIGHT = 2.0
+#: The confidence above which a joint counts in the keypoint distance, and how many joints a
+#: track and a detection must share for it to count.
+KEYPOINT_CONF = 0.3
+KEYPOINT_MIN_JOINTS = 4
 
 
 @dataclass
@@ -46,16 +56,26 @@ class _Track:
     boxes: dict[int, torch.Tensor] = field(default_factory=dict)  # frame -> (5,) box and score
     velocity: torch.Tensor = field(default_factory=lambda: torch.zeros(2))
     last: int = -1
+    keypoints: torch.Tensor | None = None  # (K, 3) x, y px, confidence: the latest frame's that had any
+    keypoint_frame: int = -1
 
     def predicted(self, t: int) -> torch.Tensor:
         box = self.boxes[self.last][:4]
         return box + (self.velocity * (t - self.last)).repeat(2)
 
-    def add(self, t: int, det: torch.Tensor, smoothing: float = SMOOTHING) -> None:
+    def predicted_keypoints(self, t: int) -> torch.Tensor | None:
+        if self.keypoints is None:
+            return None
+        return self.keypoints + torch.cat([self.velocity * (t - self.keypoint_frame), torch.zeros(1)])
+
+    def add(self, t: int, det: torch.Tensor, smoothing: float = SMOOTHING,
+            keypoints: torch.Tensor | None = None) -> None:  # fmt: skip
         if self.boxes:
             step = (_centre(det[:4]) - _centre(self.boxes[self.last][:4])) / (t - self.last)
             self.velocity = step if len(self.boxes) == 1 else (1 - smoothing) * self.velocity + smoothing * step
         self.boxes[t], self.last = det.clone(), t
+        if keypoints is not None and bool((keypoints[:, 2] > 0).any()):
+            self.keypoints, self.keypoint_frame = keypoints.clone(), t
 
 
 def _centre(box: torch.Tensor) -> torch.Tensor:
@@ -75,8 +95,23 @@ def _iou_matrix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return inter / (area(a)[:, None] + area(b)[None, :] - inter).clamp_min(1e-9)
 
 
+def _keypoint_distance(tracks: list[_Track], t: int, keypoints: torch.Tensor, side: torch.Tensor) -> torch.Tensor:
+    """(N_tracks, N_dets): the median distance between each track's predicted keypoints and each
+    detection's ``keypoints`` (N_dets, K, 3), over the joints confident (> :data:`KEYPOINT_CONF`)
+    in both, in units of the predicted box's larger side ``side`` (N_tracks,); NaN where fewer
+    than :data:`KEYPOINT_MIN_JOINTS` joints are shared (or a track has no keypoints yet)."""
+    K = keypoints.shape[1]
+    pred = torch.stack([p if (p := tr.predicted_keypoints(t)) is not None and p.shape[0] == K
+                        else torch.zeros(K, 3) for tr in tracks])  # fmt: skip
+    shared = (pred[:, None, :, 2] > KEYPOINT_CONF) & (keypoints[None, :, :, 2] > KEYPOINT_CONF)
+    dist = (pred[:, None, :, :2] - keypoints[None, :, :, :2]).norm(dim=-1) / side[:, None, None]
+    median = dist.masked_fill(~shared, math.nan).nanmedian(dim=-1).values
+    return median.masked_fill(shared.sum(-1) < KEYPOINT_MIN_JOINTS, math.nan)
+
+
 def _costs(tracks: list[_Track], t: int, dets: torch.Tensor, min_iou: float, max_jump: float,
-           max_scale: float) -> torch.Tensor:  # fmt: skip
+           max_scale: float, keypoints: torch.Tensor | None = None,
+           keypoint_weight: float = KEYPOINT_WEIGHT) -> torch.Tensor:  # fmt: skip
     """(N_tracks, N_dets) assignment costs; inf where a detection cannot be the track's."""
     pred = torch.stack([tr.predicted(t) for tr in tracks])
     gap = torch.tensor([float(t - tr.last) for tr in tracks])
@@ -86,6 +121,9 @@ def _costs(tracks: list[_Track], t: int, dets: torch.Tensor, min_iou: float, max
     cost = torch.where(iou >= min_iou, 1 - iou, 1 + dist / reach)
     ratio = _side(pred)[:, None] / _side(dets[:, :4])[None]
     far = (iou < min_iou) & (dist > reach)
+    if keypoints is not None and keypoint_weight > 0:
+        pose = _keypoint_distance(tracks, t, keypoints, _side(pred))
+        cost = cost + keypoint_weight * torch.nan_to_num(pose.clamp_max(1.0), nan=0.0)
     return cost.masked_fill(far | (ratio > max_scale) | (ratio < 1 / max_scale), math.inf)
 
 
@@ -108,20 +146,23 @@ def _assign(cost: torch.Tensor, miss: float = MISS_COST) -> list[tuple[int, int]
     return [(int(r), int(c)) for r, c in zip(rows, cols) if r < N and c < M and full[r, c] < never]
 
 
-def _link(detections: Sequence[torch.Tensor], max_gap: int, min_iou: float, max_jump: float,
-          max_scale: float, smoothing: float) -> list[_Track]:  # fmt: skip
+def _link(detections: Sequence[torch.Tensor], keypoints: Sequence[torch.Tensor] | None, max_gap: int,
+          min_iou: float, max_jump: float, max_scale: float, smoothing: float,
+          keypoint_weight: float) -> list[_Track]:  # fmt: skip
     tracks: list[_Track] = []
     for t, dets in enumerate(detections):
+        kps = None if keypoints is None else keypoints[t]
         open_ = [tr for tr in tracks if t - tr.last <= max_gap + 1]
         matched: set[int] = set()
         if open_ and dets.shape[0]:
-            for r, c in _assign(_costs(open_, t, dets, min_iou, max_jump, max_scale)):
-                open_[r].add(t, dets[c], smoothing)
+            cost = _costs(open_, t, dets, min_iou, max_jump, max_scale, kps, keypoint_weight)
+            for r, c in _assign(cost):
+                open_[r].add(t, dets[c], smoothing, None if kps is None else kps[c])
                 matched.add(c)
         for c in range(dets.shape[0]):
             if c not in matched:
                 tracks.append(_Track())
-                tracks[-1].add(t, dets[c])
+                tracks[-1].add(t, dets[c], keypoints=None if kps is None else kps[c])
     return tracks
 
 
@@ -148,6 +189,8 @@ def track_people(
     max_scale: float = 2.5,
     min_frames: int = 2,
     smoothing: float = SMOOTHING,
+    keypoints: Sequence[torch.Tensor] | None = None,
+    keypoint_weight: float = KEYPOINT_WEIGHT,
 ) -> torch.Tensor:
     """Every person's box in each frame, from per-frame detections (T tensors (N_t, 5): x0, y0,
     x1, y1 px, score, as :meth:`PersonDetector.detect_frames` gives them).
@@ -162,6 +205,13 @@ def track_people(
         min_frames: tracks detected in fewer frames (capped at T) are dropped.
         smoothing: the weight of a frame's own motion in the track's velocity (a running mean;
             lower: a longer memory, which carries a track through a crossing).
+        keypoints: optional, each detection's pose: T tensors (N_t, K, 3) x, y px, confidence
+            (0: not found), one row per detection of that frame. Where a track and a detection
+            share at least :data:`KEYPOINT_MIN_JOINTS` confident joints, the median distance
+            between the track's keypoints (moved on by its velocity) and the detection's, in box
+            sides (at most 1), x ``keypoint_weight`` is added to the pair's cost: who is who
+            where two boxes overlap.
+        keypoint_weight: see ``keypoints``; 0 ignores them.
 
     Returns:
         (P, T, 5) float32: each track's box and score per frame (zeros where the person is
@@ -178,9 +228,13 @@ def track_people(
         raise ValueError(f"smoothing: expected a number in (0, 1], got {smoothing!r}")
     if isinstance(min_frames, bool) or not isinstance(min_frames, int) or min_frames < 1:
         raise ValueError(f"min_frames: expected a number of frames >= 1, got {min_frames!r}")
+    if not keypoint_weight >= 0:
+        raise ValueError(f"keypoint_weight: expected a number >= 0, got {keypoint_weight!r}")
     detections = check_detections(detections)
+    keypoints = None if keypoints is None else _check_keypoints(keypoints, detections)
     T = len(detections)
-    tracks = [tr for tr in _link(detections, max_gap, min_iou, max_jump, max_scale, smoothing)
+    tracks = [tr for tr in _link(detections, keypoints, max_gap, min_iou, max_jump, max_scale, smoothing,
+                                 keypoint_weight)
               if len(tr.boxes) >= min(min_frames, T)]  # fmt: skip
     if not tracks:
         return torch.zeros(0, T, 5)
@@ -189,6 +243,23 @@ def track_people(
     boxes = boxes[prominence.argsort(descending=True, stable=True)]
     log.debug("people: %d tracks over %d frames (%d detections)", len(boxes), T, sum(len(d) for d in detections))
     return boxes
+
+
+def _check_keypoints(keypoints: Sequence[torch.Tensor], detections: list[torch.Tensor]) -> list[torch.Tensor]:
+    """The per-detection keypoints as float32 CPU tensors; ValueError naming the frame where they
+    do not match the detections (N_t, K, 3), or where K differs between frames."""
+    if len(keypoints) != len(detections):
+        raise ValueError(f"keypoints: expected one tensor per frame ({len(detections)}), got {len(keypoints)}")
+    out, K = [], None
+    for t, (kp, det) in enumerate(zip(keypoints, detections)):
+        kp = torch.as_tensor(kp, dtype=torch.float32).cpu()
+        other_k = K is not None and kp.ndim == 3 and kp.shape[0] > 0 and kp.shape[1] != K
+        if kp.ndim != 3 or kp.shape[0] != det.shape[0] or kp.shape[2] != 3 or other_k:
+            raise ValueError(f"keypoints[{t}]: expected ({det.shape[0]}, {K or 'K'}, 3) x, y, confidence per "
+                             f"detection, got {tuple(kp.shape)}")  # fmt: skip
+        K = kp.shape[1] if kp.shape[0] else K
+        out.append(kp)
+    return out
 
 
 def parse_people(people: str | int) -> str | int:
