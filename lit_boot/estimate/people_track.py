@@ -10,7 +10,9 @@ side x the frames since it was last seen; a detection further away, or more than
 times larger or smaller (larger side), is not that track's. Where the detections come with
 keypoints (each one's pose), the median distance of the shared confident joints from the track's
 last keypoints moved on by its velocity, in box sides (at most 1), x ``keypoint_weight`` is added:
-where one person's box lies inside another's during a crossing, the joints still say who is who.
+where one person's box lies inside another's during a crossing, the joints still say who is who;
+and the track's velocity comes from its joints' median motion where it shares enough of them with
+the last frame (an occluder moves a box's centre, not the person).
 Leaving a track or a detection unmatched costs :data:`MISS_COST` each, so a good match is never
 traded for two poor ones. A track not seen for more than ``max_gap`` frames ends; an unmatched
 detection starts a new track. Tracks seen in fewer than ``min_frames`` frames (capped at T) are
@@ -44,11 +46,13 @@ SMOOTHING = 0.1
 PEOPLE_CHOICES = ("all", "largest")
 #: The weight of the keypoint distance (in box sides, at most 1) in a pair's cost, where the
 #: detections come with keypoints (BENCHMARKS.md, "The tracker on synthetic crossings").
-KEYPOINT_WEIGHT = 2.0
-#: The confidence above which a joint counts in the keypoint distance, and how many joints a
-#: track and a detection must share for it to count.
+KEYPOINT_WEIGHT = 4.0
+#: The confidence above which a joint counts in the keypoint distance (and the joints' motion),
+#: and how many joints a track and a detection must share for it to count.
 KEYPOINT_CONF = 0.3
 KEYPOINT_MIN_JOINTS = 4
+#: A track's velocity from its joints' median motion where they are shared (else the box centre's).
+JOINT_VELOCITY = True
 
 
 @dataclass
@@ -68,10 +72,23 @@ class _Track:
             return None
         return self.keypoints + torch.cat([self.velocity * (t - self.keypoint_frame), torch.zeros(1)])
 
+    def _joint_step(self, t: int, keypoints: torch.Tensor | None) -> torch.Tensor | None:
+        """The median motion (2,) px per frame of the joints confident in both the track's last
+        keypoints and ``keypoints`` (K, 3), None with fewer than KEYPOINT_MIN_JOINTS (a box's
+        centre moves where an occluder hides part of the person; the joints do not)."""
+        if not JOINT_VELOCITY or keypoints is None or self.keypoints is None or keypoints.shape != self.keypoints.shape:
+            return None
+        shared = (keypoints[:, 2] > KEYPOINT_CONF) & (self.keypoints[:, 2] > KEYPOINT_CONF)
+        if int(shared.sum()) < KEYPOINT_MIN_JOINTS:
+            return None
+        return (keypoints[shared, :2] - self.keypoints[shared, :2]).median(0).values / (t - self.keypoint_frame)
+
     def add(self, t: int, det: torch.Tensor, smoothing: float = SMOOTHING,
             keypoints: torch.Tensor | None = None) -> None:  # fmt: skip
         if self.boxes:
-            step = (_centre(det[:4]) - _centre(self.boxes[self.last][:4])) / (t - self.last)
+            step = self._joint_step(t, keypoints)
+            if step is None:
+                step = (_centre(det[:4]) - _centre(self.boxes[self.last][:4])) / (t - self.last)
             self.velocity = step if len(self.boxes) == 1 else (1 - smoothing) * self.velocity + smoothing * step
         self.boxes[t], self.last = det.clone(), t
         if keypoints is not None and bool((keypoints[:, 2] > 0).any()):
@@ -210,7 +227,8 @@ def track_people(
             share at least :data:`KEYPOINT_MIN_JOINTS` confident joints, the median distance
             between the track's keypoints (moved on by its velocity) and the detection's, in box
             sides (at most 1), x ``keypoint_weight`` is added to the pair's cost: who is who
-            where two boxes overlap.
+            where two boxes overlap; and the track's velocity is its shared joints' median
+            motion.
         keypoint_weight: see ``keypoints``; 0 ignores them.
 
     Returns:
@@ -231,7 +249,7 @@ def track_people(
     if not keypoint_weight >= 0:
         raise ValueError(f"keypoint_weight: expected a number >= 0, got {keypoint_weight!r}")
     detections = check_detections(detections)
-    keypoints = None if keypoints is None else _check_keypoints(keypoints, detections)
+    keypoints = None if keypoints is None or keypoint_weight == 0 else _check_keypoints(keypoints, detections)
     T = len(detections)
     tracks = [tr for tr in _link(detections, keypoints, max_gap, min_iou, max_jump, max_scale, smoothing,
                                  keypoint_weight)
