@@ -18,7 +18,6 @@ from typing import Any
 
 import lightning as L
 import torch
-from lightning.pytorch.callbacks import TQDMProgressBar
 
 from ..core import Scene
 from ..finite import NonFiniteError, finite_fault
@@ -26,6 +25,7 @@ from ..flow import FlowTTT, SceneFlowData, SketchConfig
 from ..flow.data import SOURCE_OF_MODE
 from ..pose import KeypointRefiner, PoseData, PoseRefiner, PoseResult
 from ..pose.api import make_refiner, make_trainer
+from ..progress import progress_bar as make_progress_bar
 
 __all__ = ["make_flow_model", "predict_flows", "fine_tune_flow", "refine_poses_stage", "require_finite",
            "quiet_refiner"]
@@ -58,8 +58,9 @@ def _raise_fault(trainer: L.Trainer, stage: str) -> None:
 
 
 def _bars(progress_bar: bool) -> list:
-    """Lightning's plain (tqdm) progress bar when asked: the same bars whatever else is installed."""
-    return [TQDMProgressBar()] if progress_bar else []
+    """Lightning's plain (tqdm) progress bar when asked: the same bars whatever else is installed
+    (:func:`lit_boot.progress.progress_bar`: redrawn per epoch only in a log file)."""
+    return [make_progress_bar()] if progress_bar else []
 
 
 def _flow_trainer(*, max_epochs: int, accelerator: str, precision: str, loggers: list, progress_bar: bool) -> L.Trainer:

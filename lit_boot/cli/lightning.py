@@ -20,9 +20,10 @@ from fnmatch import fnmatch
 from pathlib import Path
 
 import lightning as L
-from lightning.pytorch.callbacks import Callback, ModelSummary, ProgressBar, TQDMProgressBar
+from lightning.pytorch.callbacks import Callback, ModelSummary, ProgressBar
 from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
 
+from ..progress import progress_bar
 from .console import CliError, HelpFormatter, Suggesting, error_line
 
 __all__ = ["LitBootArgumentParser", "LitBootCLI", "lightning", "run_lightning_cli"]
@@ -88,7 +89,7 @@ def plain_callbacks(trainer: dict, configured: list[Callback]) -> list[Callback]
     callbacks ``configured`` would add itself, as tqdm's and the plain (logged) ones."""
     missing = []
     if trainer.get("enable_progress_bar") is not False and not any(isinstance(c, ProgressBar) for c in configured):
-        missing.append(TQDMProgressBar())
+        missing.append(progress_bar())
     if trainer.get("enable_model_summary") is not False and not any(isinstance(c, ModelSummary) for c in configured):
         missing.append(ModelSummary())
     return missing
