@@ -11,7 +11,7 @@ the other people walk across, crossing and occluding person 0.
 
 Usage: python benchmarks/people_synth_tracking.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--jitter 0.05] [--miss 0.1] [--smoothing 0.5] [--keypoints]
-           [--keypoint-weight 1] [--json out.json]
+           [--pose-miss 0.3] [--keypoint-weight 1] [--json out.json]
 """
 
 from __future__ import annotations
@@ -82,6 +82,8 @@ def main() -> None:
     parser.add_argument("--miss", type=float, default=0.1)
     parser.add_argument("--smoothing", type=float, default=None, help="track_people's smoothing (default: its own)")
     parser.add_argument("--keypoints", action="store_true", help="give the tracker each detection's keypoints")
+    parser.add_argument("--pose-miss", type=float, default=0.0,
+                        help="with --keypoints: the share of detections whose pose is not found (confidence 0)")
     parser.add_argument("--keypoint-weight", type=float, default=None, help="track_people's keypoint_weight")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
@@ -94,6 +96,7 @@ def main() -> None:
                                people=n)  # fmt: skip
             g = torch.Generator().manual_seed(seed)
             dets, who, kps = detections_of(scene, args.jitter, args.miss, g)
+            kps = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= args.pose_miss) for k in kps]
             options = {"smoothing": args.smoothing, "keypoint_weight": args.keypoint_weight}
             tracks = track_people(dets, keypoints=kps if args.keypoints else None,
                                   **{k: v for k, v in options.items() if v is not None})  # fmt: skip

@@ -46,7 +46,7 @@ SMOOTHING = 0.1
 PEOPLE_CHOICES = ("all", "largest")
 #: The weight of the keypoint distance (in box sides, at most 1) in a pair's cost, where the
 #: detections come with keypoints (BENCHMARKS.md, "The tracker on synthetic crossings").
-KEYPOINT_WEIGHT = 4.0
+KEYPOINT_WEIGHT = 1.0
 #: The confidence above which a joint counts in the keypoint distance (and the joints' motion),
 #: and how many joints a track and a detection must share for it to count.
 KEYPOINT_CONF = 0.3
