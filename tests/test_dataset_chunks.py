@@ -229,7 +229,8 @@ def test_slice_scene_per_frame_metadata() -> None:
             "gt_pairs": [[1, 2], [3, 4], [4, 5]],
             "missing_masks": ["invalid/x/frame_0001.png", "occlusions/x/frame_0003.png"],
             "keypoint_failures": [{"kind": "jump", "frame": 1}, {"kind": "lock", "frames": [0, 1, 2, 3]}],
-            "pose_estimates": [{"source": "s", "frame_indices": [0, 2, 4, 6, 8]}]}  # fmt: skip
+            "pose_estimates": [{"source": "s", "frame_indices": [0, 2, 4, 6, 8]}],
+            "people": [{"motion": "walk", "keypoint_failures": [{"kind": "jump", "frame": 3}]}, {"track_id": 2}]}  # fmt: skip
     scene.metadata = meta
     part = slice_scene(scene, 2, 5)
     assert part.metadata["frame_indices"] == [4, 6, 8] and part.metadata["files"] == ["c", "d", "e"]
@@ -238,6 +239,9 @@ def test_slice_scene_per_frame_metadata() -> None:
     assert part.metadata["missing_masks"] == ["occlusions/x/frame_0003.png"]
     assert part.metadata["keypoint_failures"] == [{"kind": "lock", "frames": [0, 1]}]
     assert part.metadata["pose_estimates"][0]["frame_indices"] == [4, 6, 8]
+    # each other person's synthetic failures are cut too; other records are kept as they are
+    assert part.metadata["people"] == [{"motion": "walk", "keypoint_failures": [{"kind": "jump", "frame": 1}]},
+                                       {"track_id": 2}]  # fmt: skip
 
 
 def test_task_load_with_frames_is_slice_of_the_whole(synthetic, tmp_path) -> None:

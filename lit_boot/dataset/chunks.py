@@ -134,6 +134,10 @@ def _cut_metadata(meta: dict[str, Any], start: int, stop: int, T: int) -> dict[s
         out["camera"] = {k: v[start:stop] if per_frame(v) else v for k, v in meta["camera"].items()}
     if isinstance(meta.get("keypoint_failures"), list):
         out["keypoint_failures"] = _cut_events(meta["keypoint_failures"], start, stop)
+    if isinstance(meta.get("people"), list):  # lit_boot.synth with several people: each one's failures
+        out["people"] = [{**person, "keypoint_failures": _cut_events(person["keypoint_failures"], start, stop)}
+                         if isinstance(person, dict) and isinstance(person.get("keypoint_failures"), list) else person
+                         for person in meta["people"]]  # fmt: skip
     if isinstance(meta.get("pose_estimates"), list):
         out["pose_estimates"] = [
             {**e, "frame_indices": e["frame_indices"][start:stop]}
