@@ -118,3 +118,5 @@ def test_a_synthetic_scene_with_several_people_is_cut_with_every_persons_truth()
     assert cut.num_people == 2 and len(cut.gt.others) == 1
     assert torch.equal(cut.gt.others[0].person_mask, scene.gt.others[0].person_mask[1:4])
     assert torch.equal(cut.others[0].keypoints2d, scene.others[0].keypoints2d[1:4])
+    assert "ground truth: flow" in cut.summary() and "every person's (2 people)" in cut.summary()
+    assert "every person's" not in make_scene(frames=3, height=64, width=128, seed=0).summary()

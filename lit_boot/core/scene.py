@@ -310,7 +310,8 @@ class Scene:
         if self.gt is not None:
             have = [k for k in ("flow", "flow_occluded", "joints3d", "joints2d", "keypoints2d", "person_mask", "cameras")
                     if getattr(self.gt, k) is not None]  # fmt: skip
-            lines.append(f"  ground truth: {', '.join(have) if have else 'none'}")
+            others = f"; every person's ({1 + len(self.gt.others)} people)" if self.gt.others else ""
+            lines.append(f"  ground truth: {', '.join(have) if have else 'none'}{others}")
             if self.gt.flow is not None:
                 valid, mag = self.gt.flow_valid, self.gt.flow.norm(dim=1)
                 pairs = ""
