@@ -190,6 +190,21 @@ def test_the_joints_give_the_velocity_where_an_occluder_moves_the_box(monkeypatc
     assert any(len(w) > 1 for w in by_box)
 
 
+def test_the_keypoint_distance_is_per_frame_since_the_pose_was_seen(monkeypatch):
+    """Seed 30, exact boxes, half the poses not found: person 1's pose is missing in frames 6-8,
+    so in frame 9 its track's keypoints are 4 frames old. Their raw distance from its own
+    detection then costs more than a miss and the track splits in two; per frame since the pose
+    was seen, each person is one track."""
+    import lit_boot.estimate.people_track as people_track
+
+    dets, keypoints, owners = synthetic_crossing(30)
+    g = torch.Generator().manual_seed(1)
+    keypoints = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= 0.5) for k in keypoints]
+    assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}]
+    monkeypatch.setattr(people_track, "KEYPOINT_PER_FRAME", False)
+    assert len(followed(track_people(dets, keypoints=keypoints), dets, owners)) == 3
+
+
 def test_keypoints_are_checked_against_the_detections():
     dets, keypoints, _ = synthetic_crossing(40)
     with pytest.raises(ValueError, match=r"keypoints\[2\]: expected \(2, 17, 3\)"):

@@ -9,7 +9,8 @@ a track is ``1 - IoU`` with the predicted box when they overlap by at least ``mi
 side x the frames since it was last seen; a detection further away, or more than ``max_scale``
 times larger or smaller (larger side), is not that track's. Where the detections come with
 keypoints (each one's pose), the median distance of the shared confident joints from the track's
-last keypoints moved on by its velocity, in box sides (at most 1), x ``keypoint_weight`` is added:
+last keypoints moved on by its velocity, in box sides per frame since those keypoints were seen
+(at most 1), x ``keypoint_weight`` is added:
 where one person's box lies inside another's during a crossing, the joints still say who is who;
 and the track's velocity comes from its joints' median motion where it shares enough of them with
 the last frame (an occluder moves a box's centre, not the person).
@@ -46,13 +47,16 @@ SMOOTHING = 0.1
 PEOPLE_CHOICES = ("all", "largest")
 #: The weight of the keypoint distance (in box sides, at most 1) in a pair's cost, where the
 #: detections come with keypoints (BENCHMARKS.md, "The tracker on synthetic crossings").
-KEYPOINT_WEIGHT = 1.0
+KEYPOINT_WEIGHT = 4.0
 #: The confidence above which a joint counts in the keypoint distance (and the joints' motion),
 #: and how many joints a track and a detection must share for it to count.
 KEYPOINT_CONF = 0.3
 KEYPOINT_MIN_JOINTS = 4
 #: A track's velocity from its joints' median motion where they are shared (else the box centre's).
 JOINT_VELOCITY = True
+#: The keypoint distance per frame since the track's keypoints were seen (a pose unseen for a while
+#: predicts loosely; BENCHMARKS.md, "Keypoints in the tracker").
+KEYPOINT_PER_FRAME = True
 
 
 @dataclass
@@ -115,7 +119,8 @@ def _iou_matrix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 def _keypoint_distance(tracks: list[_Track], t: int, keypoints: torch.Tensor, side: torch.Tensor) -> torch.Tensor:
     """(N_tracks, N_dets): the median distance between each track's predicted keypoints and each
     detection's ``keypoints`` (N_dets, K, 3), over the joints confident (> :data:`KEYPOINT_CONF`)
-    in both, in units of the predicted box's larger side ``side`` (N_tracks,); NaN where fewer
+    in both, in units of the predicted box's larger side ``side`` (N_tracks,) per frame since the
+    track's keypoints were seen (a pose unseen for a while is a looser prediction); NaN where fewer
     than :data:`KEYPOINT_MIN_JOINTS` joints are shared (or a track has no keypoints yet)."""
     K = keypoints.shape[1]
     pred = torch.stack([p if (p := tr.predicted_keypoints(t)) is not None and p.shape[0] == K
@@ -123,6 +128,9 @@ def _keypoint_distance(tracks: list[_Track], t: int, keypoints: torch.Tensor, si
     shared = (pred[:, None, :, 2] > KEYPOINT_CONF) & (keypoints[None, :, :, 2] > KEYPOINT_CONF)
     dist = (pred[:, None, :, :2] - keypoints[None, :, :, :2]).norm(dim=-1) / side[:, None, None]
     median = dist.masked_fill(~shared, math.nan).nanmedian(dim=-1).values
+    if KEYPOINT_PER_FRAME:
+        age = torch.tensor([float(t - tr.keypoint_frame) if tr.keypoints is not None else 1.0 for tr in tracks])
+        median = median / age[:, None].clamp_min(1.0)
     return median.masked_fill(shared.sum(-1) < KEYPOINT_MIN_JOINTS, math.nan)
 
 
@@ -226,7 +234,8 @@ def track_people(
             (0: not found), one row per detection of that frame. Where a track and a detection
             share at least :data:`KEYPOINT_MIN_JOINTS` confident joints, the median distance
             between the track's keypoints (moved on by its velocity) and the detection's, in box
-            sides (at most 1), x ``keypoint_weight`` is added to the pair's cost: who is who
+            sides per frame since the track's keypoints were seen (at most 1), x
+            ``keypoint_weight`` is added to the pair's cost: who is who
             where two boxes overlap; and the track's velocity is its shared joints' median
             motion.
         keypoint_weight: see ``keypoints``; 0 ignores them.
