@@ -10,7 +10,8 @@ side x the frames since it was last seen; a detection further away, or more than
 times larger or smaller (larger side), is not that track's. Where the detections come with
 keypoints (each one's pose), the median distance of the shared confident joints from the track's
 last keypoints moved on by its velocity, in box sides per frame since those keypoints were seen
-(at most 1), x ``keypoint_weight`` is added:
+(at most 1), x ``keypoint_weight`` is added, and :data:`KEYPOINT_GAP_COST` per frame the track has
+gone unseen beyond the last (a track seen a frame ago goes first):
 where one person's box lies inside another's during a crossing, the joints still say who is who;
 and the track's velocity comes from its joints' median motion where it shares enough of them with
 the last frame (an occluder moves a box's centre, not the person).
@@ -57,6 +58,10 @@ JOINT_VELOCITY = True
 #: The keypoint distance per frame since the track's keypoints were seen (a pose unseen for a while
 #: predicts loosely; BENCHMARKS.md, "Keypoints in the tracker").
 KEYPOINT_PER_FRAME = True
+#: Where the detections come with keypoints: the cost per frame a track has gone unseen beyond the
+#: last. A track seen a frame ago predicts better than one unseen for longer, whose keypoint
+#: distance (per frame since seen) is also cheap (BENCHMARKS.md, "Keypoints in the tracker").
+KEYPOINT_GAP_COST = 0.3
 
 
 @dataclass
@@ -149,6 +154,7 @@ def _costs(tracks: list[_Track], t: int, dets: torch.Tensor, min_iou: float, max
     if keypoints is not None and keypoint_weight > 0:
         pose = _keypoint_distance(tracks, t, keypoints, _side(pred))
         cost = cost + keypoint_weight * torch.nan_to_num(pose.clamp_max(1.0), nan=0.0)
+        cost = cost + KEYPOINT_GAP_COST * (gap[:, None] - 1)
     return cost.masked_fill(far | (ratio > max_scale) | (ratio < 1 / max_scale), math.inf)
 
 
@@ -235,9 +241,9 @@ def track_people(
             share at least :data:`KEYPOINT_MIN_JOINTS` confident joints, the median distance
             between the track's keypoints (moved on by its velocity) and the detection's, in box
             sides per frame since the track's keypoints were seen (at most 1), x
-            ``keypoint_weight`` is added to the pair's cost: who is who
-            where two boxes overlap; and the track's velocity is its shared joints' median
-            motion.
+            ``keypoint_weight`` is added to the pair's cost (and :data:`KEYPOINT_GAP_COST` per
+            frame the track has gone unseen beyond the last): who is who where two boxes
+            overlap; and the track's velocity is its shared joints' median motion.
         keypoint_weight: see ``keypoints``; 0 ignores them.
 
     Returns:
