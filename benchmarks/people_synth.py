@@ -10,7 +10,8 @@ and motions below, 8 frames, 128x256, the default preset (3D or ``--mode 2d``).
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/people_synth.py [--mode 3d|2d] [--people 2,3] [--seeds 30,31]
-      [--variants every,main] [--flow '{"people_balance": true}'] [--weights ../shared/checkpoints/raft-small.pth]
+      [--variants every,main] [--flow '{"people_balance": true}'] [--config '{"zoom": {"confirm": "veto"}}']
+      [--weights ../shared/checkpoints/raft-small.pth]
       [--out /tmp/people_synth] [--json out.json]
 """
 
@@ -57,6 +58,7 @@ def main() -> None:
     p.add_argument("--out", default="/tmp/people_synth")
     p.add_argument("--variants", default="every,main", help="every (the scene as generated), main (person 0 alone)")
     p.add_argument("--flow", default="{}", help='extra FlowTTT options as JSON, e.g. \'{"people_balance": true}\'')
+    p.add_argument("--config", default="{}", help='more BootstrapConfig options, JSON, e.g. \'{"zoom": {"confirm": "veto"}}\'')
     p.add_argument("--json", default=None)
     args = p.parse_args()
     rows = []
@@ -70,7 +72,8 @@ def main() -> None:
                 shutil.rmtree(out, ignore_errors=True)
                 start = time.perf_counter()
                 flow = {"weights": args.weights, **json.loads(args.flow)}
-                result = bootstrap(run_scene, out, mode=args.mode, flow=flow, progress_bar=False, video=False)
+                result = bootstrap(run_scene, out, mode=args.mode, flow=flow, progress_bar=False, video=False,
+                                   **json.loads(args.config))
                 seconds = time.perf_counter() - start
                 gt = scene.gt.flow
                 row = {"people": n, "seed": seed, "variant": variant, "seconds": round(seconds, 1),

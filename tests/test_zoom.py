@@ -96,7 +96,7 @@ def test_the_zoomed_flow_is_scaled_back_to_the_frames_pixels(monkeypatch):
 
 
 def test_zoom_pair_pastes_the_zoomed_flow_into_its_region_only(monkeypatch):
-    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates: torch.ones(
+    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates, *rest: torch.ones(
         2, crop[1] - crop[0], crop[3] - crop[2]))  # fmt: skip
     frames = torch.zeros(2, 3, 120, 200, dtype=torch.uint8)
     base = torch.zeros(2, 120, 200)
@@ -133,7 +133,7 @@ def test_the_stage_keeps_a_confirmed_refinement_and_refuses_a_large_change():
     base = truth.clone()
     base[0, 20:70, 30:90] = 0.5  # RAFT's flow wrong on the person
     region = (20, 70, 30, 90)
-    config = ZoomConfig()
+    config = ZoomConfig(confirm="census")
     keep = keep_pixels(frames, base, truth, region, config)
     assert keep[25:65, 40:80].float().mean() > 0.95  # confirmed by the frames, a change of 2.5 px
     assert not keep[:20].any() and not keep[:, :30].any()  # only within the region
@@ -151,6 +151,29 @@ def test_the_stage_keeps_a_confirmed_refinement_and_refuses_a_large_change():
     assert not keep_pixels(frames, base, far, region, alone).any()  # ... and the large change refused
 
 
+def test_the_veto_keeps_the_zoomed_flow_unless_the_frames_refuse_it():
+    """confirm="veto": the zoomed flow is kept where the frames cannot tell (a flat region, where
+    census keeps RAFT's), and refused where they say RAFT's is better."""
+    frames = _textured_pair(3)
+    truth = torch.zeros(2, 96, 128)
+    truth[0] = 3.0
+    region = (20, 70, 30, 90)
+    veto, census = ZoomConfig(confirm="veto"), ZoomConfig(confirm="census")
+    base = truth.clone()
+    base[0, 20:70, 30:90] = 0.5
+    assert keep_pixels(frames, base, truth, region, veto)[25:65, 40:80].float().mean() > 0.95  # better: kept
+    near, wrong = truth.clone(), truth.clone()
+    near[0, 20:70, 30:90], wrong[0, 20:70, 30:90] = 2.0, 0.0
+    assert keep_pixels(frames, near, wrong, region, veto)[25:65, 40:80].float().mean() < 0.05  # worse: refused
+    flat = torch.full_like(frames, 128)
+    assert keep_pixels(flat, base, truth, region, veto)[20:70, 30:90].all()  # no evidence either way: kept
+    assert not keep_pixels(flat, base, truth, region, census).any()
+    assert not keep_pixels(flat, base, truth, region, veto)[:20].any()  # only within the region
+    far = base.clone()
+    far[0, 20:70, 30:90] = 3.0 + 16.0
+    assert not keep_pixels(frames, base, far, region, veto).any()  # the refinement limit holds
+
+
 def test_zoom_flows_records_every_pair(monkeypatch):
     frames = _textured_pair(3, frames=3)
     scene = lit_boot.Scene(frames=frames)
@@ -158,7 +181,7 @@ def test_zoom_flows_records_every_pair(monkeypatch):
     boxes = torch.tensor([[40.0, 30, 80, 60, 1], [40, 30, 80, 60, 1], [0, 0, 0, 0, 0]])
     truth = torch.zeros(2, 96, 128)
     truth[0] = 3.0
-    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates: truth[
+    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates, *rest: truth[
         :, crop[0] : crop[1], crop[2] : crop[3]])  # fmt: skip
     flows, kept, record = zoom_flows(None, scene, base, boxes, ZoomConfig())
     assert record["zoomed_pairs"] == 2 and len(record["per_pair"]) == 2
@@ -180,7 +203,7 @@ def test_every_person_is_zoomed_in_turn(monkeypatch):
                            person_boxes=a, others=(Person(track_id=4, keypoints2d=torch.full((3, 17, 2), 90.0),
                                                           keypoints_conf=conf, person_boxes=b),))  # fmt: skip
     truth = torch.full((2, 96, 128), 3.0)
-    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates: truth[
+    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates, *rest: truth[
         :, crop[0] : crop[1], crop[2] : crop[3]])  # fmt: skip
     base = torch.zeros(2, 2, 96, 128)
     flows, kept, record, person = _zoom_people(None, scene, base, "2d", ZoomConfig())
@@ -262,3 +285,38 @@ def test_the_command_line_spells_the_zoom_settings_nested(tmp_path):
         default = dataclass_from(bootstrap_parser().parse_args(["--config", config, "--data.scene", str(tmp_path)]),
                                  BootstrapConfig)  # fmt: skip
         assert default.zoom == ZoomConfig()  # the config files state the defaults
+
+
+def test_frame2s_crop_follows_the_person_inside_the_frame():
+    from lit_boot.flow.zoom import box_motion, shifted_crop
+
+    base = torch.zeros(2, 50, 80)
+    base[0, 10:30, 20:40], base[1, 10:30, 20:40] = 12.4, -3.0
+    base[0, 10:12, 20:40] = 100.0  # a few outliers: the median holds
+    assert box_motion(base, torch.tensor([20.0, 10, 39, 29])).tolist() == pytest.approx([12.4, -3.0])
+    assert shifted_crop((5, 35, 10, 50), torch.tensor([12.4, -3.0]), (50, 80)) == (12, -3)
+    assert shifted_crop((5, 35, 10, 50), torch.tensor([45.0, -9.0]), (50, 80)) == (30, -5)  # held at the edges
+    with pytest.raises(ValueError, match="zoom.start: expected one of"):
+        ZoomConfig(start="base")
+
+
+def test_a_shifted_or_warm_started_zoom_follows_a_motion_beyond_rafts_reach(shared):
+    """Real RAFT-small on a texture moved 64 px and a crop 40 px wide: frame2's same crop does not
+    hold what frame1's shows (and zoomed 2x the motion is 128 px), so RAFT from zero fails; with
+    frame2's crop following the motion (shift, 4 px short), or moved 44 px with RAFT started from a
+    flow 4 px off (warm), the zoomed flow is right."""
+    frames = _textured_pair(64)
+    model = lit_boot.flow.load_raft("raft_small", str(shared / "checkpoints/raft-small.pth")).eval()
+    crop = (8, 88, 4, 44)
+    truth = torch.tensor([64.0, 0.0])[:, None, None]
+
+    def error(flow):
+        return float((flow - truth).norm(dim=0)[8:-8, 8:-8].mean())
+
+    zero = flow_zoom.zoomed_flow(model, frames[0], frames[1], crop, 2.0, 12)
+    shifted = flow_zoom.zoomed_flow(model, frames[0], frames[1], crop, 2.0, 12, shift=(60, 0))
+    near = torch.zeros(2, 80, 40)
+    near[0] = 60.0
+    warm = flow_zoom.zoomed_flow(model, frames[0], frames[1], crop, 2.0, 12, shift=(44, 0), start=near)
+    assert error(zero) > 10.0
+    assert error(shifted) < 1.0 and error(warm) < 1.0

@@ -35,8 +35,11 @@ ZOOMS = ("off", "person")
 #: What the flow stages learn from the zoom: nothing (off), its flow as the base the stick-man is
 #: painted over (base), or that and its confirmed pixels painted instead of the stick-man (confirmed).
 ZOOM_TEACHING = ("off", "base", "confirmed")
-#: What must confirm the zoomed flow, beside the refinement limit: the frames (census) or nothing.
-ZOOM_CONFIRM = ("census", "none")
+#: How RAFT starts on the zoomed crops (as lit_boot.flow.zoom.ZOOM_STARTS; see ZoomConfig.start).
+ZOOM_STARTS = ("zero", "shift", "warm")
+#: What the frames say of the zoomed flow, beside the refinement limit: not worse (veto), better
+#: (census), or nothing (none).
+ZOOM_CONFIRM = ("census", "veto", "none")
 
 #: The default preset's fast fine-tune (issue 15): see lit_boot.flow.warm.
 FAST_FLOW: dict[str, Any] = {"train_parts": "update_block", "warm_start": True, "train_updates": 2, "crop_margin": 24,
@@ -160,12 +163,18 @@ class ZoomConfig:
         max_updates: the most RAFT iterations on the zoomed crop.
         max_change_px: the zoomed flow is kept only where it moves RAFT's flow by less than
             this, px (16: two cells of RAFT's grid): a refinement, not another match.
-        confirm: census (the frames must say the zoomed flow is better: ``window`` and
-            ``margin``) or none (the refinement limit alone; BENCHMARKS.md, "What the zoom stage
-            keeps").
+        confirm: veto (kept unless the frames say RAFT's flow is better: its census error
+            averaged over ``window`` lower by ``margin``), census (the frames must say the
+            zoomed flow is better: its averaged error lower by ``margin``, and the pixel's own
+            lower too) or none (the refinement limit alone). BENCHMARKS.md, "The zoom stage's
+            veto".
         window: the box (px) over which each pixel's census errors are averaged.
-        margin: how much lower (a fraction of RAFT's) the zoomed flow's averaged error must be;
-            the pixel's own error must be lower too.
+        margin: how much lower (a fraction of the other's) the winning flow's averaged error
+            must be (veto: RAFT's to refuse the zoomed flow; census: the zoomed flow's to be
+            kept).
+        start: how RAFT starts on the zoomed crops: zero (from zero, on the same crop of both
+            frames), shift (frame2's crop follows the person's median motion, and the scale is
+            chosen from the motion left) or warm (shift, and RAFT starts from its own flow).
         teach: what the flow stages' fine-tune learns from the zoom: off, base (the stick-man is
             painted over the zoom stage's flow instead of RAFT's) or confirmed (that, and where
             the zoomed flow was kept it is the target instead of the stick-man).
@@ -181,14 +190,17 @@ class ZoomConfig:
     updates: int = 8
     max_updates: int = 16
     max_change_px: float = 16.0
-    confirm: str = "census"
+    confirm: str = "veto"
     window: int = 5
     margin: float = 0.02
+    start: str = "zero"
     teach: str = "off"
 
     def __post_init__(self) -> None:
         if self.confirm not in ZOOM_CONFIRM:
             raise ValueError(f"zoom.confirm: expected one of {ZOOM_CONFIRM}, got {self.confirm!r}")
+        if self.start not in ZOOM_STARTS:
+            raise ValueError(f"zoom.start: expected one of {ZOOM_STARTS}, got {self.start!r}")
         if self.teach not in ZOOM_TEACHING:
             raise ValueError(f"zoom.teach: expected one of {ZOOM_TEACHING}, got {self.teach!r}")
         if self.method not in (None, *ZOOMS):

@@ -1,4 +1,4 @@
-"""The zoom stage: RAFT's flow refined where the person is, kept only where the frames confirm it.
+"""The zoom stage: RAFT's flow refined where the person is, kept unless the frames refuse it.
 
 After the initial stage (pretrained RAFT on every pair), each pair with a person is run again on
 a crop around the person's box, zoomed (:mod:`lit_boot.flow.zoom`: the scale chosen from the
@@ -6,10 +6,13 @@ motion). The zoomed flow replaces RAFT's pixel by pixel where both hold:
 
 - it refines RAFT's flow: it moves it by less than ``max_change_px`` (a large change is another
   match, which the frames cannot be trusted to judge: fog, blur and fast motion fool them);
-- the frames say it is better: its census error averaged over a ``window`` box is below
-  ``(1 - margin)`` x RAFT's, and the pixel's own error is lower too (the self-check's person rule,
-  :func:`~lit_boot.bootstrap.selfcheck.choose_pixels`); with ``confirm="none"`` this test is
-  left out.
+- the frames do not refuse it (``confirm="veto"``, the default): RAFT's census error averaged
+  over a ``window`` box is not below ``(1 - margin)`` x the zoomed flow's. Where the frames
+  cannot tell (flat or repeated texture, small flows) the zoomed flow is kept: at the zoomed
+  size RAFT resolves more, and where it bleeds over a silhouette the frames do tell. With
+  ``confirm="census"`` the frames must say it is better instead (the self-check's person rule,
+  :func:`~lit_boot.bootstrap.selfcheck.choose_pixels`: its averaged error below ``(1 - margin)``
+  x RAFT's and the pixel's own lower too); with ``confirm="none"`` nothing is asked of them.
 
 The result is the flow the flow stages start from and are checked against. The person's box per
 frame: the scene's ``person_boxes`` when it has them (a person detector), else the box around
@@ -61,7 +64,7 @@ def box_masks(boxes: Tensor, size: tuple[int, int]) -> Tensor:
 def keep_pixels(frames: Tensor, base: Tensor, candidate: Tensor, region: tuple[int, int, int, int],
                 config: ZoomConfig) -> Tensor:  # fmt: skip
     """(H, W) bool: the region's pixels where the candidate (2, H, W) refines ``base`` and the
-    frames (2, 3, H, W) confirm it (see the module doc)."""
+    frames (2, 3, H, W) do not refuse it (``config.confirm``; see the module doc)."""
     height, width = base.shape[-2:]
     y0, y1, x0, x1 = region
     reach = CENSUS_RADIUS + config.window // 2 + 1  # the window's context around the region
@@ -77,8 +80,12 @@ def keep_pixels(frames: Tensor, base: Tensor, candidate: Tensor, region: tuple[i
     pair = frames[:1], frames[1:]
     err_b, valid_b = photometric_error(*pair, base[None].float(), radius=CENSUS_RADIUS, box=box)
     err_z, valid_z = photometric_error(*pair, candidate[None].float(), radius=CENSUS_RADIUS, box=box)
-    won = choose_pixels(err_b[0], err_z[0], (valid_b & valid_z)[0], select, window=config.window,
-                        margin=config.margin, own=True)  # fmt: skip
+    valid = (valid_b & valid_z)[0]
+    if config.confirm == "veto":  # kept unless the frames say RAFT's flow is better
+        lost = choose_pixels(err_z[0], err_b[0], valid, select, window=config.window, margin=config.margin)
+        keep[by0:by1, bx0:bx1] = select & ~lost
+        return keep
+    won = choose_pixels(err_b[0], err_z[0], valid, select, window=config.window, margin=config.margin, own=True)
     keep[by0:by1, bx0:bx1] = won
     return keep
 
@@ -98,7 +105,8 @@ def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: Z
         zoomed = zoom_pair(model, frames[t], frames[t + 1], base[t], box, max_scale=config.max_scale,
                            min_scale=config.min_scale, reach_px=config.reach_px, context=config.context,
                            min_context_px=config.min_context_px, border_px=config.border_px,
-                           min_updates=config.updates, max_updates=config.max_updates)  # fmt: skip
+                           min_updates=config.updates, max_updates=config.max_updates,
+                           start=config.start)  # fmt: skip
         record = zoomed.record()
         if zoomed.region is not None:
             kept[t] = keep_pixels(frames[t : t + 2], base[t], zoomed.candidate, zoomed.region, config)

@@ -30,12 +30,15 @@ import torch.nn.functional as F
 from torch import Tensor
 from torchvision.models.optical_flow import RAFT
 
-from .raft import predict_flow
+from .raft import context_state, encode_frames, predict_flow, prepare_pair, run_updates, unpad
 
 __all__ = ["boxes_from_points", "pair_boxes", "zoom_crop", "zoom_scale", "zoom_updates", "zoomed_flow",
+           "box_motion", "shifted_crop", "ZOOM_STARTS",
            "paste_region", "refines", "ZoomedPair", "zoom_pair"]
 
 Region = tuple[int, int, int, int]
+#: How RAFT starts on the zoomed crops: see :func:`zoom_pair`.
+ZOOM_STARTS = ("zero", "shift", "warm")
 
 
 def boxes_from_points(points: Tensor, keep: Tensor) -> Tensor:
@@ -74,16 +77,34 @@ def zoom_crop(box: Tensor, size: tuple[int, int], *, context: float, min_context
             max(0, math.floor(x0 - margin)), min(width, math.ceil(x1 + margin) + 1))  # fmt: skip
 
 
-def zoom_scale(base: Tensor, box: Tensor, *, max_scale: float, min_scale: float, reach_px: float) -> tuple[float, float]:
-    """The scale to zoom a pair at, and the motion it was chosen from: (s, the 95th percentile of
-    the magnitude (px) of ``base`` (2, H, W), RAFT's own flow, on the box (4,)). s = min(max_scale,
-    reach_px / motion); 1.0 (no zoom) when that is below ``min_scale``."""
-    height, width = base.shape[-2:]
+def _box_slices(box: Tensor, size: tuple[int, int]) -> tuple[slice, slice]:
+    """The rows and columns of a box (4,) x0, y0, x1, y1 px inside a frame of ``size`` (H, W)."""
+    height, width = size
     x0, y0, x1, y1 = box.tolist()
-    ys = slice(max(0, round(y0)), min(height, round(y1) + 1))
-    xs = slice(max(0, round(x0)), min(width, round(x1) + 1))
-    magnitude = base[:, ys, xs].norm(dim=0).flatten()
-    motion = float(magnitude.float().quantile(0.95)) if magnitude.numel() else 0.0
+    return (slice(max(0, round(y0)), min(height, round(y1) + 1)),
+            slice(max(0, round(x0)), min(width, round(x1) + 1)))  # fmt: skip
+
+
+def box_motion(base: Tensor, box: Tensor) -> Tensor:
+    """The person's typical motion: the per-axis median of ``base`` (2, H, W) px on the box (4,)
+    x0, y0, x1, y1 px, (2,) px (dx, dy); zeros for an empty box."""
+    ys, xs = _box_slices(box, tuple(base.shape[-2:]))
+    values = base[:, ys, xs].reshape(2, -1).float()
+    return values.median(dim=1).values if values.shape[1] else torch.zeros(2)
+
+
+def zoom_scale(base: Tensor, box: Tensor, *, max_scale: float, min_scale: float, reach_px: float,
+               relative_to: Tensor | None = None) -> tuple[float, float]:  # fmt: skip
+    """The scale to zoom a pair at, and the motion it was chosen from: (s, the 95th percentile of
+    the magnitude (px) of ``base`` (2, H, W), RAFT's own flow, on the box (4,); less
+    ``relative_to`` (2,) px where given: the motion left once frame2's crop follows the person).
+    s = min(max_scale, reach_px / motion); 1.0 (no zoom) when that is below ``min_scale``."""
+    ys, xs = _box_slices(box, tuple(base.shape[-2:]))
+    flow = base[:, ys, xs].float()
+    if relative_to is not None:
+        flow = flow - relative_to.float()[:, None, None]
+    magnitude = flow.norm(dim=0).flatten()
+    motion = float(magnitude.quantile(0.95)) if magnitude.numel() else 0.0
     scale = min(max_scale, reach_px / motion) if motion > 0 else max_scale
     return (scale if scale >= min_scale else 1.0), motion
 
@@ -102,21 +123,57 @@ def _resize(image: Tensor, size: tuple[int, int]) -> Tensor:
 
 
 @torch.no_grad()
-def zoomed_flow(model: RAFT, frame1: Tensor, frame2: Tensor, crop: Region, scale: float, updates: int) -> Tensor:
-    """RAFT's flow (2, h, w) px at the crop's own size for the crop (y0, y1, x0, x1) of two
-    frames (3, H, W) uint8, computed on the crop upsampled by ``scale`` (bilinear) and scaled
-    back (bilinear, flow / scale), with ``updates`` iterations from zero, on the model's device."""
+def zoomed_flow(model: RAFT, frame1: Tensor, frame2: Tensor, crop: Region, scale: float, updates: int,
+                shift: tuple[int, int] = (0, 0), start: Tensor | None = None) -> Tensor:  # fmt: skip
+    """RAFT's flow (2, h, w) px at the crop's own size for the crop (y0, y1, x0, x1) of frame1
+    and the same-size crop of frame2 moved by ``shift`` (dx, dy) px (inside the frame: see
+    :func:`shifted_crop`), frames (3, H, W) uint8, computed on the crops upsampled by ``scale``
+    (bilinear) and scaled back (bilinear, flow / scale), the shift added back; ``updates``
+    iterations from zero, or from ``start`` (2, h, w) px (a flow of the crop, e.g. RAFT's own:
+    a warm start, so that RAFT's reach applies to what it corrects, not to the whole motion), on
+    the model's device."""
     y0, y1, x0, x1 = crop
-    a, b = frame1[:, y0:y1, x0:x1], frame2[:, y0:y1, x0:x1]
+    dx, dy = shift
+    a, b = frame1[:, y0:y1, x0:x1], frame2[:, y0 + dy : y1 + dy, x0 + dx : x1 + dx]
     h, w = a.shape[-2:]
     size = (max(1, round(h * scale)), max(1, round(w * scale)))
+    factor = torch.tensor([size[1] / w, size[0] / h])[:, None, None]
     was_training = model.training
     model.eval()
     try:
-        flow = predict_flow(model, _resize(a, size)[None], _resize(b, size)[None], updates)[0].float().cpu()
+        if start is None:
+            flow = predict_flow(model, _resize(a, size)[None], _resize(b, size)[None], updates)[0].float().cpu()
+        else:
+            moved = (start.float() - torch.tensor([dx, dy], dtype=torch.float32)[:, None, None]) * factor
+            flow = _warm_flow(model, _resize(a, size), _resize(b, size), _resize(moved, size), updates)
     finally:
         model.train(was_training)
-    return _resize(flow, (h, w)) / torch.tensor([size[1] / w, size[0] / h])[:, None, None]
+    return _resize(flow, (h, w)) / factor + torch.tensor([dx, dy], dtype=torch.float32)[:, None, None]
+
+
+def _warm_flow(model: RAFT, image1: Tensor, image2: Tensor, start: Tensor, updates: int) -> Tensor:
+    """RAFT's flow (2, h, w) px of two images (3, h, w) uint8 with ``updates`` iterations from
+    ``start`` (2, h, w) px (replicate-padded like the images, averaged onto RAFT's 1/8 grid)."""
+    device = next(model.parameters()).device
+    a, b, pad = prepare_pair(image1.to(device), image2.to(device))
+    left, right, top, bottom = pad
+    padded = F.pad(start[None].to(device), (left, right, top, bottom), mode="replicate")
+    flow8 = F.avg_pool2d(padded, 8) / 8
+    fmap1, fmap2 = torch.chunk(encode_frames(model, torch.cat([a, b])), chunks=2, dim=0)
+    hidden, context = context_state(model, a)
+    flows, _ = run_updates(model, fmap1, fmap2, hidden, context, flow8, updates)
+    return unpad(flows[-1], pad)[0].float().cpu()
+
+
+def shifted_crop(crop: Region, shift: Tensor, size: tuple[int, int]) -> tuple[int, int]:
+    """The whole-pixel shift (dx, dy) of frame2's crop that follows ``shift`` (2,) px (the
+    person's typical motion) as far as the crop (y0, y1, x0, x1) stays inside a frame of ``size``
+    (H, W)."""
+    y0, y1, x0, x1 = crop
+    height, width = size
+    dx = min(max(round(float(shift[0])), -x0), width - x1)
+    dy = min(max(round(float(shift[1])), -y0), height - y1)
+    return dx, dy
 
 
 def paste_region(crop: Region, size: tuple[int, int], border: int) -> Region:
@@ -139,7 +196,8 @@ class ZoomedPair:
     into ``region``; ``base`` itself when not zoomed), the scale (1.0: not zoomed), the motion
     it was chosen from (px), the crop and the pasted region (y0, y1, x0, x1) px or None, the
     zoomed pixels as a fraction of the frame's (the zoom's cost relative to RAFT's) and the RAFT
-    iterations run on them (0: not zoomed)."""
+    iterations run on them (0: not zoomed), and the whole-pixel shift (dx, dy) of frame2's crop.
+    """
 
     candidate: Tensor
     scale: float
@@ -148,33 +206,44 @@ class ZoomedPair:
     region: Region | None
     cost: float
     updates: int = 0
+    shift: tuple[int, int] = (0, 0)
 
     def record(self) -> dict:
-        """JSON-ready: scale, motion, crop, region, cost, updates."""
+        """JSON-ready: scale, motion, crop, region, cost, updates, shift (dx, dy) px."""
         return {"scale": round(self.scale, 4), "motion_px": round(self.motion_px, 3), "crop": self.crop,
-                "region": self.region, "cost": round(self.cost, 4), "updates": self.updates}  # fmt: skip
+                "region": self.region, "cost": round(self.cost, 4), "updates": self.updates,
+                "shift": list(self.shift)}  # fmt: skip
 
 
 def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Tensor | None, *, max_scale: float,
               min_scale: float, reach_px: float, context: float, min_context_px: int, border_px: int,
-              min_updates: int, max_updates: int) -> ZoomedPair:  # fmt: skip
+              min_updates: int, max_updates: int, start: str = "zero") -> ZoomedPair:  # fmt: skip
     """The zoom of one pair: frames (3, H, W) uint8, ``base`` (2, H, W) px RAFT's own flow, the
     pair's person box (4,) or None (nobody: not zoomed); the scale from :func:`zoom_scale`, the
     crop from :func:`zoom_crop`, pasted into :func:`paste_region` (``border_px``), the RAFT
-    iterations on the zoomed crop from :func:`zoom_updates`. See :class:`ZoomedPair`."""
+    iterations on the zoomed crop from :func:`zoom_updates`. ``start``: ``zero`` (RAFT from zero
+    on the same crop of both frames), ``shift`` (frame2's crop follows the person's typical
+    motion, :func:`box_motion`, and the scale is chosen from the motion left) or ``warm``
+    (``shift``, and RAFT starts from ``base``). See :class:`ZoomedPair`."""
+    if start not in ZOOM_STARTS:
+        raise ValueError(f"start: expected one of {ZOOM_STARTS}, got {start!r}")
     size = tuple(base.shape[-2:])
     if box is None:
         return ZoomedPair(base, 1.0, 0.0, None, None, 0.0)
-    scale, motion = zoom_scale(base, box, max_scale=max_scale, min_scale=min_scale, reach_px=reach_px)
     crop = zoom_crop(box, size, context=context, min_context_px=min_context_px)
+    shift = (0, 0) if start == "zero" else shifted_crop(crop, box_motion(base, box), size)
+    relative_to = None if start == "zero" else torch.tensor(shift, dtype=torch.float32)
+    scale, motion = zoom_scale(base, box, max_scale=max_scale, min_scale=min_scale, reach_px=reach_px,
+                               relative_to=relative_to)  # fmt: skip
     region = paste_region(crop, size, border_px)
     ry0, ry1, rx0, rx1 = region
     if scale == 1.0 or ry0 >= ry1 or rx0 >= rx1:
         return ZoomedPair(base, 1.0, motion, None, None, 0.0)
     updates = zoom_updates(scale, motion, min_updates=min_updates, max_updates=max_updates)
-    flow = zoomed_flow(model, frame1, frame2, crop, scale, updates)
+    y0, y1, x0, x1 = crop
+    warm = base[:, y0:y1, x0:x1] if start == "warm" else None
+    flow = zoomed_flow(model, frame1, frame2, crop, scale, updates, shift, warm)
     candidate = base.clone()
-    y0, _, x0, _ = crop
     candidate[:, ry0:ry1, rx0:rx1] = flow[:, ry0 - y0 : ry1 - y0, rx0 - x0 : rx1 - x0].to(candidate)
-    cost = (crop[1] - crop[0]) * (crop[3] - crop[2]) * scale**2 / (size[0] * size[1])
-    return ZoomedPair(candidate, scale, motion, crop, region, cost, updates)
+    cost = (y1 - y0) * (x1 - x0) * scale**2 / (size[0] * size[1])
+    return ZoomedPair(candidate, scale, motion, crop, region, cost, updates, shift)
