@@ -6,7 +6,9 @@ Per scene and variant: the change of the final flow's EPE against pretrained RAF
 person's pixels (GT ``person_mask`` of person 0 and ``gt.others[i].person_mask``: where that
 person is the visible surface in frame t, valid and not occluded), on the background (nobody's
 pixels) and on all pixels; wall time. Scenes: lit_boot.synth.make_scene(people=N) with the seeds
-and motions below, 8 frames, 128x256, the default preset (3D or ``--mode 2d``).
+and motions below, 8 frames, 128x256, the default preset (3D or ``--mode 2d``). The motion follows
+the seed's place in ``--seeds`` (walk, run, wave): the tuning seeds 30,31 and the validation seeds
+32,33 are each run as their own command (walk, run), as BENCHMARKS.md's tables were.
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/people_synth.py [--mode 3d|2d] [--people 2,3] [--seeds 30,31]
