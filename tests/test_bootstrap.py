@@ -244,7 +244,7 @@ def test_stage_records_hold_the_image_evidence(tiny_scene, tmp_path):
 
     result = bootstrap(tiny_scene, tmp_path / "run", flow=RANDOM_RAFT, video=False, cycles=0, **FAST)
     initial, zoom, flow_1 = result.history
-    assert 0 < zoom["photo_error"] <= initial["photo_error"]  # kept only where the frames confirm it
+    assert 0 < zoom["photo_error"] <= initial["photo_error"]  # refused where the frames say RAFT's is better
     assert 0 < flow_1["photo_error"] < 48 and 0 < initial["track_error"] < 48
     # the GT flow explains the frames better than zero motion, the GT joint tracks better than
     # the same tracks with 2 px of jitter

@@ -1,5 +1,5 @@
 """The zoom: RAFT on a zoomed crop around the person (lit_boot.flow.zoom) and the zoom stage that
-keeps it where the frames confirm it (lit_boot.bootstrap.zoom)."""
+keeps it unless the frames refuse it (lit_boot.bootstrap.zoom)."""
 
 from __future__ import annotations
 

@@ -143,7 +143,7 @@ class SelfCheckConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class ZoomConfig:
-    """The zoom stage: RAFT on a zoomed crop around the person, kept where the frames confirm it
+    """The zoom stage: RAFT on a zoomed crop around the person, kept unless the frames refuse it
     (:mod:`lit_boot.bootstrap.zoom`, :mod:`lit_boot.flow.zoom`).
 
     Args:
@@ -292,8 +292,8 @@ class BootstrapConfig:
         self_check: after each flow stage, without ground truth: keep the tuned flow only where
             the frames say it beats the flow it started from (:class:`SelfCheckConfig`:
             ``method`` None is the preset's; a dict of its fields is taken too).
-        zoom: before the flow stages, RAFT on a zoomed crop around the person, kept where the
-            frames confirm it (:class:`ZoomConfig`: ``method`` None is the preset's; a dict of
+        zoom: before the flow stages, RAFT on a zoomed crop around the person, kept unless the
+            frames refuse it (:class:`ZoomConfig`: ``method`` None is the preset's; a dict of
             its fields is taken too).
         seed: seed_everything before each stage (the same run gives the same result).
     """

@@ -237,7 +237,7 @@ class Bootstrap:
 
     def _zoom_stage(self, name: str, index: int, st: _RunState) -> tuple[dict[str, Any], torch.Tensor, dict]:
         """RAFT (ensemble member 0, pretrained) on a zoomed crop around the person of every pair,
-        kept where the frames confirm it (:func:`~lit_boot.bootstrap.zoom.zoom_stage`)."""
+        kept unless the frames refuse it (:func:`~lit_boot.bootstrap.zoom.zoom_stage`)."""
         cfg = self.config
         log.info(stage_header(index, len(cfg.stages()), name, f"RAFT zoomed on the person, on {st.accelerator}"))
         record, flows, decisions = zoom_stage(self._model(0, st.person_px).raft, st.scene, st.initial, mode=cfg.mode,
