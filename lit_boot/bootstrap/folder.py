@@ -6,6 +6,24 @@ decides: same settings resume; other settings are refused once a stage has finis
 stage.json exists) and replace the run otherwise (it had produced nothing); ``overwrite``
 starts again. Only a folder holding a lit-boot run (config.json) or an empty one is ever
 cleared, even with ``overwrite``.
+
+What a run folder holds (the input scene folder is never written)::
+
+    config.json            the run's settings (a rerun with other settings is refused once a
+                           stage has finished; before that it replaces the run)
+    .lock                  the lock one run at a time holds (pid and host of the last holder)
+    stages/<stage>/        initial, flow_1, pose_1, flow_2, ...: each stage's flows.npz,
+                           fine-tuned RAFT weights (raft_<member>.pt) or refined poses, and
+                           stage.json, written last: a stage with stage.json is done, and a
+                           rerun of an interrupted run loads it instead of running it again
+    flows/                 the final flows (flow_<t>.flo or flows.npz) and colour PNGs
+    poses.npz, pose_report.json  the final refined poses (a lit-boot pose file) and their report
+    raft_finetuned.pt      the final fine-tuned RAFT weights (torchvision format)
+    summary.json           settings, device, every metric per stage, timings, guard events
+    metrics.png            the metrics per stage
+    overlay.mp4            frame, flows (RAFT, refined, GT), EPE change, skeletons (overlay.py)
+    report.html            whether the video got better, and where (html_report.py; written last)
+    logs/tensorboard/, logs/csv/   per stage (training curves) and "summary" (per stage)
 """
 
 from __future__ import annotations
