@@ -10,11 +10,12 @@ RAFT's and the zoom's seconds against RAFT's.
 - ``--source synthetic``: the suite scenes of benchmarks/bootstrap_suite.py (``--set tuning``:
   SCENES, ``validation``: VALIDATION; 8 frames, 128x256), the boxes around the pose of ``--mode``
   (3d: the projected METRO-like joints, 2d: the DCPose-like keypoints); EPE over valid
-  non-occluded pixels, all / person / background, mean over scenes.
+  non-occluded pixels, all / person / background, mean over scenes. ``--set small`` and
+  ``small_validation``: SMALL and SMALL_VALIDATION, small people at 256x512, 4 frames.
 
 Usage:
   python benchmarks/zoom_stage.py --source sintel|synthetic [--windows alley_1,...] [--size 218,512|full]
-      [--set tuning|validation] [--mode 3d|2d] [--variants '{"default": {}, "wide": {"context": 0.5}}']
+      [--set tuning|validation|small|small_validation] [--mode 3d|2d] [--variants '{"default": {}, "wide": {"context": 0.5}}']
       [--weights ../shared/checkpoints/raft-small.pth] [--json out.json]
 """
 
@@ -56,10 +57,22 @@ def sintel_cases(args, model):
         yield window, scene, pairs, boxes, {"all": scene.gt.flow_valid[pairs]}
 
 
+#: Small people (issue 24: resolution where the person is, chosen from the person's size): a
+#: tuning set and a validation set, 256x512, 4 frames, the person filling 25-35% of the height.
+SMALL = [("small_walk_s50", dict(motion="walk", seed=50, fill=0.3)), ("small_run_s51", dict(motion="run", seed=51, fill=0.3)),
+         ("small_jump_s52", dict(motion="jump", seed=52, fill=0.3)), ("small_walk_s53", dict(motion="walk", seed=53, fill=0.3))]
+SMALL_VALIDATION = [("small_run_s54", dict(motion="run", seed=54, fill=0.25), "realistic"),
+                    ("small_wave_s55", dict(motion="wave", seed=55, fill=0.35), "accurate"),
+                    ("small_turn_s56", dict(motion="turn", seed=56, fill=0.3), "realistic"),
+                    ("small_walk_s57", dict(motion="walk", seed=57, fill=0.25, heading_deg=40.0), "accurate")]
+SETS = {"tuning": SCENES, "validation": VALIDATION, "small": SMALL, "small_validation": SMALL_VALIDATION}
+
+
 def synthetic_cases(args, model):
-    for name, spec, *own in SCENES if args.set == "tuning" else VALIDATION:
+    size = dict(frames=4, height=256, width=512) if args.set.startswith("small") else dict(frames=8, height=128, width=256)
+    for name, spec, *own in SETS[args.set]:
         estimates = EstimateConfig(**(ACCURATE_DETECTOR if own and own[0] == "accurate" else {}))
-        scene = make_scene(frames=8, height=128, width=256, estimates=estimates, **spec)
+        scene = make_scene(**size, estimates=estimates, **spec)
         valid, person = scene.gt.flow_mask(), scene.gt.person_mask[:-1]
         pairs = list(range(scene.num_frames - 1))
         yield name, scene, pairs, pose_boxes(scene, args.mode), {"all": valid, "person": valid & person,
@@ -72,7 +85,7 @@ def main() -> None:
     p.add_argument("--windows", default=",".join(w for w, *_ in SINTEL))
     p.add_argument("--heldout-root", default=str(HELDOUT_ROOT))
     p.add_argument("--size", default="218,512")
-    p.add_argument("--set", default="tuning", choices=("tuning", "validation"))
+    p.add_argument("--set", default="tuning", choices=tuple(SETS))
     p.add_argument("--mode", default="3d", choices=("3d", "2d"))
     p.add_argument("--variants", default='{"default": {}}', help="name -> ZoomConfig fields, JSON")
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))

@@ -320,3 +320,32 @@ def test_a_shifted_or_warm_started_zoom_follows_a_motion_beyond_rafts_reach(shar
     warm = flow_zoom.zoomed_flow(model, frames[0], frames[1], crop, 2.0, 12, shift=(44, 0), start=near)
     assert error(zero) > 10.0
     assert error(shifted) < 1.0 and error(warm) < 1.0
+
+
+def test_a_small_persons_crop_is_zoomed_more_at_the_same_cost(monkeypatch):
+    from lit_boot.flow.zoom import scale_cap
+
+    # a crop of a quarter of the frame's pixels: 2x costs one frame, so no more than max_scale
+    assert scale_cap((0, 50, 0, 100), (100, 200), max_scale=2.0, small_scale=4.0, max_cost=1.0) == 2.0
+    # a crop of 1/16 of the frame: 4x costs one frame
+    assert scale_cap((0, 25, 0, 50), (100, 200), max_scale=2.0, small_scale=4.0, max_cost=1.0) == pytest.approx(4.0)
+    # 1/9: 3x; and never more than small_scale however small
+    assert scale_cap((0, 20, 0, 50), (90, 100), max_scale=2.0, small_scale=4.0, max_cost=1.0) == pytest.approx(3.0)
+    assert scale_cap((0, 5, 0, 5), (100, 200), max_scale=2.0, small_scale=4.0, max_cost=1.0) == 4.0
+    frames = torch.zeros(2, 3, 200, 400, dtype=torch.uint8)
+    seen = {}
+
+    def fake(model, a, b, crop, scale, updates, *rest):
+        seen["scale"] = scale
+        return torch.zeros(2, crop[1] - crop[0], crop[3] - crop[2])
+
+    monkeypatch.setattr(flow_zoom, "zoomed_flow", fake)
+    box = torch.tensor([190.0, 90.0, 210.0, 110.0])  # a 20 px person: its crop (52 px) is 1/30 of the frame
+    pair = zoom_pair(None, frames[0], frames[1], torch.zeros(2, 200, 400), box, **ZOOM, small_scale=4.0)
+    assert pair.scale == 4.0 and seen["scale"] == 4.0
+    assert zoom_pair(None, frames[0], frames[1], torch.zeros(2, 200, 400), box, **ZOOM).scale == 2.0
+    fast = torch.zeros(2, 200, 400)
+    fast[0] = 20.0  # 20 px of motion: the reach (60 px) allows 3x only
+    assert zoom_pair(None, frames[0], frames[1], fast, box, **ZOOM, small_scale=4.0).scale == pytest.approx(3.0)
+    with pytest.raises(ValueError, match="zoom.small_scale"):
+        ZoomConfig(small_scale=1.5)

@@ -148,7 +148,13 @@ class ZoomConfig:
 
     Args:
         method: None (the preset's: person in default, off in paper), off, or person.
-        max_scale: the largest upsampling of the crop.
+        max_scale: the largest upsampling of the crop (but see ``small_scale``).
+        small_scale: a small person's crop may be upsampled more, up to this, as far as the
+            zoomed crop stays within ``max_cost`` frames of pixels (the same cost as a large
+            person's zoom); None (the default): ``max_scale`` for everyone. 4 helps small people
+            (BENCHMARKS.md, "Small people zoomed more"), but one validation scene's background
+            went over the no-harm bar with it, so it is not the default.
+        max_cost: see ``small_scale``: the zoomed crop's pixels, in frames.
         min_scale: a pair whose scale would be below this is not zoomed: its motion is close to
             RAFT's reach at the zoomed size, where the zoom does harm (market_5 at full size,
             zoomed 1.25x: +1.7%; BENCHMARKS.md, "Resolution where the person is").
@@ -182,6 +188,8 @@ class ZoomConfig:
 
     method: str | None = None
     max_scale: float = 2.0
+    small_scale: float | None = None
+    max_cost: float = 1.0
     min_scale: float = 1.5
     reach_px: float = 60.0
     context: float = 0.5
@@ -208,7 +216,9 @@ class ZoomConfig:
         if not 1.0 <= self.min_scale <= self.max_scale:
             raise ValueError(f"zoom.min_scale / zoom.max_scale: expected 1 <= min_scale <= max_scale, "
                              f"got {self.min_scale} / {self.max_scale}")  # fmt: skip
-        for name in ("reach_px", "max_change_px", "context"):
+        if self.small_scale is not None and not self.small_scale >= self.max_scale:
+            raise ValueError(f"zoom.small_scale: expected None or >= max_scale ({self.max_scale}), got {self.small_scale}")
+        for name in ("reach_px", "max_change_px", "context", "max_cost"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"zoom.{name}: expected > 0, got {getattr(self, name)}")
         for name, least in (("min_context_px", 0), ("border_px", 0), ("updates", 1), ("window", 1),

@@ -9,7 +9,8 @@ motion is large, RAFT at ``s`` times the size sees ``s`` times the displacement 
 
 - the scale is chosen per pair from the motion (:func:`zoom_scale`): the zoomed motion (``s`` x
   the 95th percentile of RAFT's own flow magnitude on the person's box) must stay within
-  ``reach_px``; at most ``max_scale``, and no zoom below ``min_scale``;
+  ``reach_px``; at most ``max_scale`` (or, for a small person's crop, more: :func:`scale_cap`),
+  and no zoom below ``min_scale``;
 - what is kept is decided from the frames, per pixel, by the orchestrator
   (:mod:`lit_boot.bootstrap.zoom`, whose ``ZoomConfig`` holds the settings), with
   :func:`refines` as one of its tests: the zoomed flow may move RAFT's flow by less than
@@ -33,7 +34,7 @@ from torchvision.models.optical_flow import RAFT
 from .raft import context_state, encode_frames, predict_flow, prepare_pair, run_updates, unpad
 
 __all__ = ["boxes_from_points", "pair_boxes", "zoom_crop", "zoom_scale", "zoom_updates", "zoomed_flow",
-           "box_motion", "shifted_crop", "ZOOM_STARTS",
+           "box_motion", "shifted_crop", "scale_cap", "ZOOM_STARTS",
            "paste_region", "refines", "ZoomedPair", "zoom_pair"]
 
 Region = tuple[int, int, int, int]
@@ -215,12 +216,24 @@ class ZoomedPair:
                 "shift": list(self.shift)}  # fmt: skip
 
 
+def scale_cap(crop: Region, size: tuple[int, int], *, max_scale: float, small_scale: float,
+              max_cost: float) -> float:  # fmt: skip
+    """The largest scale for a crop (y0, y1, x0, x1) of a frame of ``size`` (H, W): ``max_scale``,
+    or more for a small person, up to ``small_scale``, as far as the zoomed crop stays within
+    ``max_cost`` frames of pixels (a small person is zoomed more at the same cost as a large one)."""
+    y0, y1, x0, x1 = crop
+    area = max(1, (y1 - y0) * (x1 - x0))
+    return max(max_scale, min(small_scale, math.sqrt(max_cost * size[0] * size[1] / area)))
+
+
 def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Tensor | None, *, max_scale: float,
               min_scale: float, reach_px: float, context: float, min_context_px: int, border_px: int,
-              min_updates: int, max_updates: int, start: str = "zero") -> ZoomedPair:  # fmt: skip
+              min_updates: int, max_updates: int, start: str = "zero", small_scale: float | None = None,
+              max_cost: float = 1.0) -> ZoomedPair:  # fmt: skip
     """The zoom of one pair: frames (3, H, W) uint8, ``base`` (2, H, W) px RAFT's own flow, the
-    pair's person box (4,) or None (nobody: not zoomed); the scale from :func:`zoom_scale`, the
-    crop from :func:`zoom_crop`, pasted into :func:`paste_region` (``border_px``), the RAFT
+    pair's person box (4,) or None (nobody: not zoomed); the scale from :func:`zoom_scale`, at most
+    :func:`scale_cap` (``small_scale`` None: ``max_scale``), the crop from :func:`zoom_crop`,
+    pasted into :func:`paste_region` (``border_px``), the RAFT
     iterations on the zoomed crop from :func:`zoom_updates`. ``start``: ``zero`` (RAFT from zero
     on the same crop of both frames), ``shift`` (frame2's crop follows the person's typical
     motion, :func:`box_motion`, and the scale is chosen from the motion left) or ``warm``
@@ -233,6 +246,8 @@ def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Te
     crop = zoom_crop(box, size, context=context, min_context_px=min_context_px)
     shift = (0, 0) if start == "zero" else shifted_crop(crop, box_motion(base, box), size)
     relative_to = None if start == "zero" else torch.tensor(shift, dtype=torch.float32)
+    if small_scale is not None:
+        max_scale = scale_cap(crop, size, max_scale=max_scale, small_scale=small_scale, max_cost=max_cost)
     scale, motion = zoom_scale(base, box, max_scale=max_scale, min_scale=min_scale, reach_px=reach_px,
                                relative_to=relative_to)  # fmt: skip
     region = paste_region(crop, size, border_px)
