@@ -6,7 +6,8 @@ box, for pretrained RAFT's flow and the final flow. Also the people's counts and
 
 Usage:
   OMP_NUM_THREADS=1 python benchmarks/people_real.py [--videos street,football,basketball]
-      [--resize 360] [--max-frames 8] [--weights ../shared/checkpoints/raft-small.pth] [--json out.json]
+      [--resize 360] [--max-frames 8] [--weights ../shared/checkpoints/raft-small.pth] [--config JSON]
+      [--json out.json]
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ def main() -> None:
     p.add_argument("--max-frames", type=int, default=8)
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))
     p.add_argument("--out", default="/tmp/people_real")
+    p.add_argument("--config", default="{}", help='more BootstrapConfig options, JSON, e.g. \'{"zoom": {"small_scale": 4}}\'')
     p.add_argument("--json", default=None)
     args = p.parse_args()
     rows = []
@@ -61,7 +63,8 @@ def main() -> None:
         out = Path(args.out) / name
         shutil.rmtree(out, ignore_errors=True)
         start = time.perf_counter()
-        result = bootstrap(scene, out, mode="2d", flow={"weights": args.weights}, progress_bar=False, video=False)
+        result = bootstrap(scene, out, mode="2d", flow={"weights": args.weights}, progress_bar=False, video=False,
+                           **json.loads(args.config))
         run_s = time.perf_counter() - start
         people = []
         for person in scene.people():
