@@ -19,15 +19,10 @@ import json
 from pathlib import Path
 
 import torch
-import torch.nn.functional as F
 
 from lit_boot.flow import load_raft, predict_flow
 from lit_boot.flow.zoom import zoomed_flow
 from real_data import HELDOUT_ROOT, SHARED, SINTEL, window_with_boxes
-
-
-def resized(image: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
-    return F.interpolate(image[None].float(), size=size, mode="bilinear", align_corners=False)[0]
 
 
 def main() -> None:
@@ -47,13 +42,12 @@ def main() -> None:
         for t in (t for t in range(scene.num_frames - 1) if scene.gt.flow_valid[t].any()):
             a, b = scene.frames[t], scene.frames[t + 1]
             base = predict_flow(model, a[None], b[None])[0]
-            flows = {"base": base, "warm_self": zoomed_flow(model, a, b, (0, height, 0, width), 1.0, 32, start=base)}
+            whole = (0, height, 0, width)
+            flows = {"base": base, "warm_self": zoomed_flow(model, a, b, whole, 1.0, 32, start=base)}
             for factor in (float(v) for v in args.factors.split(",")):
-                small = (round(height * factor), round(width * factor))
-                little = predict_flow(model, resized(a, small)[None].round().byte(), resized(b, small)[None].round().byte())[0]
-                coarse = resized(little, (height, width)) / torch.tensor([small[1] / width, small[0] / height])[:, None, None]
+                coarse = zoomed_flow(model, a, b, whole, factor, 32)  # RAFT on the resized pair
                 flows[f"coarse{factor}"] = coarse
-                flows[f"warm{factor}"] = zoomed_flow(model, a, b, (0, height, 0, width), 1.0, 32, start=coarse)
+                flows[f"warm{factor}"] = zoomed_flow(model, a, b, whole, 1.0, 32, start=coarse)
             valid = scene.gt.flow_valid[t]
             for name, flow in flows.items():
                 errors.setdefault(name, []).append(float((flow - scene.gt.flow[t]).norm(dim=0)[valid].mean()))

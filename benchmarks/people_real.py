@@ -50,7 +50,8 @@ def main() -> None:
     p.add_argument("--max-frames", type=int, default=8)
     p.add_argument("--weights", default=str(SHARED / "checkpoints/raft-small.pth"))
     p.add_argument("--out", default="/tmp/people_real")
-    p.add_argument("--config", default="{}", help='more BootstrapConfig options, JSON, e.g. \'{"zoom": {"small_scale": 4}}\'')
+    p.add_argument("--config", default="{}",
+                   help='more BootstrapConfig options, JSON, e.g. \'{"zoom": {"small_scale": 4}}\'')
     p.add_argument("--json", default=None)
     args = p.parse_args()
     rows = []

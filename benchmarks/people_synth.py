@@ -60,7 +60,8 @@ def main() -> None:
     p.add_argument("--out", default="/tmp/people_synth")
     p.add_argument("--variants", default="every,main", help="every (the scene as generated), main (person 0 alone)")
     p.add_argument("--flow", default="{}", help='extra FlowTTT options as JSON, e.g. \'{"people_balance": true}\'')
-    p.add_argument("--config", default="{}", help='more BootstrapConfig options, JSON, e.g. \'{"zoom": {"confirm": "veto"}}\'')
+    p.add_argument("--config", default="{}",
+                   help='more BootstrapConfig options, JSON, e.g. \'{"zoom": {"confirm": "veto"}}\'')
     p.add_argument("--json", default=None)
     args = p.parse_args()
     rows = []

@@ -15,7 +15,8 @@ RAFT's and the zoom's seconds against RAFT's.
 
 Usage:
   python benchmarks/zoom_stage.py --source sintel|synthetic [--windows alley_1,...] [--size 218,512|full]
-      [--set tuning|validation|small|small_validation] [--mode 3d|2d] [--variants '{"default": {}, "wide": {"context": 0.5}}']
+      [--set tuning|validation|small|small_validation] [--mode 3d|2d]
+      [--variants '{"default": {}, "wide": {"context": 0.5}}']
       [--weights ../shared/checkpoints/raft-small.pth] [--json out.json]
 """
 
@@ -59,8 +60,10 @@ def sintel_cases(args, model):
 
 #: Small people (issue 24: resolution where the person is, chosen from the person's size): a
 #: tuning set and a validation set, 256x512, 4 frames, the person filling 25-35% of the height.
-SMALL = [("small_walk_s50", dict(motion="walk", seed=50, fill=0.3)), ("small_run_s51", dict(motion="run", seed=51, fill=0.3)),
-         ("small_jump_s52", dict(motion="jump", seed=52, fill=0.3)), ("small_walk_s53", dict(motion="walk", seed=53, fill=0.3))]
+SMALL = [("small_walk_s50", dict(motion="walk", seed=50, fill=0.3)),
+         ("small_run_s51", dict(motion="run", seed=51, fill=0.3)),
+         ("small_jump_s52", dict(motion="jump", seed=52, fill=0.3)),
+         ("small_walk_s53", dict(motion="walk", seed=53, fill=0.3))]
 SMALL_VALIDATION = [("small_run_s54", dict(motion="run", seed=54, fill=0.25), "realistic"),
                     ("small_wave_s55", dict(motion="wave", seed=55, fill=0.35), "accurate"),
                     ("small_turn_s56", dict(motion="turn", seed=56, fill=0.3), "realistic"),
@@ -69,7 +72,8 @@ SETS = {"tuning": SCENES, "validation": VALIDATION, "small": SMALL, "small_valid
 
 
 def synthetic_cases(args, model):
-    size = dict(frames=4, height=256, width=512) if args.set.startswith("small") else dict(frames=8, height=128, width=256)
+    small = args.set.startswith("small")
+    size = dict(frames=4, height=256, width=512) if small else dict(frames=8, height=128, width=256)
     for name, spec, *own in SETS[args.set]:
         estimates = EstimateConfig(**(ACCURATE_DETECTOR if own and own[0] == "accurate" else {}))
         scene = make_scene(**size, estimates=estimates, **spec)

@@ -217,7 +217,8 @@ class ZoomConfig:
             raise ValueError(f"zoom.min_scale / zoom.max_scale: expected 1 <= min_scale <= max_scale, "
                              f"got {self.min_scale} / {self.max_scale}")  # fmt: skip
         if self.small_scale is not None and not self.small_scale >= self.max_scale:
-            raise ValueError(f"zoom.small_scale: expected None or >= max_scale ({self.max_scale}), got {self.small_scale}")
+            raise ValueError(f"zoom.small_scale: expected None or >= max_scale ({self.max_scale}), "
+                             f"got {self.small_scale}")  # fmt: skip
         for name in ("reach_px", "max_change_px", "context", "max_cost"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"zoom.{name}: expected > 0, got {getattr(self, name)}")

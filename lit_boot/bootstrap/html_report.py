@@ -126,8 +126,8 @@ def _zoom_table(record: dict[str, Any], pairs: int) -> str:
     head = ["zoom stage", "pairs zoomed", "scale", "motion (p95 on the box)", "pixels keeping the zoomed flow",
             "cost (RAFT passes)", "rolled back"]  # fmt: skip
     return (f"<h3>The zoom stage</h3>{table(head, [row])}<p class=\"note\">RAFT again on a zoomed crop around the "
-            "person; its flow is kept only where it refines RAFT's and the frames do not refuse it. Per pair: the table "
-            "at the end.</p>")  # fmt: skip
+            "person; its flow is kept only where it refines RAFT's and the frames do not refuse it. Per pair: "
+            "the table at the end.</p>")  # fmt: skip
 
 
 def _guard_part(run: FinishedRun) -> str:

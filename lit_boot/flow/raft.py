@@ -146,11 +146,18 @@ def truncated_raft(model: RAFT, image1: torch.Tensor, image2: torch.Tensor, upda
     the first ``updates - grad_updates`` iterations run without gradient, and only the last
     ``grad_updates`` iterations' flows are upsampled and returned, (B, 2, H, W) px each. Inputs
     as torchvision's RAFT takes them (see :func:`prepare_pair`). The values equal the forward's."""
-    if not 1 <= grad_updates <= updates:
+    return _iterate(model, image1, image2, updates, grad_updates, None)
+
+
+def _iterate(model: RAFT, image1: torch.Tensor, image2: torch.Tensor, updates: int, grad_updates: int | None,
+             flow8: torch.Tensor | None) -> list[torch.Tensor]:  # fmt: skip
+    """RAFT's encoders and ``updates`` iterations on prepared inputs, from ``flow8`` (see
+    :func:`run_updates`): the upsampled flows of the iterations with gradient."""
+    if grad_updates is not None and not 1 <= grad_updates <= updates:
         raise ValueError(f"grad_updates: expected 1..{updates} (the training updates), got {grad_updates}")
     fmap1, fmap2 = torch.chunk(encode_frames(model, torch.cat([image1, image2], dim=0)), chunks=2, dim=0)
     hidden, context = context_state(model, image1)
-    return run_updates(model, fmap1, fmap2, hidden, context, None, updates, grad_updates)[0]
+    return run_updates(model, fmap1, fmap2, hidden, context, flow8, updates, grad_updates)[0]
 
 
 def predict_flow(
@@ -160,15 +167,22 @@ def predict_flow(
     num_flow_updates: int = 32,
     all_updates: bool = False,
     grad_updates: int | None = None,
+    start: torch.Tensor | None = None,
 ) -> torch.Tensor | list[torch.Tensor]:
     """Forward flow image1 -> image2 with ``num_flow_updates`` RAFT iterations: (B, 2, H, W) in
     pixels at the input size (or the list of every update's flow with ``all_updates``).
     Runs on the model's device; gradients flow when enabled (used for fine-tuning), through the
     last ``grad_updates`` iterations only when given (:func:`truncated_raft`; ``all_updates``
-    then lists those iterations' flows)."""
+    then lists those iterations' flows). ``start`` (B, 2, H, W) px: a warm start, the iterations
+    begin from it (replicate-padded like the images, averaged onto RAFT's 1/8 grid) instead of
+    zero."""
     device = next(model.parameters()).device
     a, b, pad = prepare_pair(image1.to(device), image2.to(device))
-    if grad_updates is None:
+    if start is not None:
+        left, right, top, bottom = pad
+        padded = F.pad(start.to(device).float(), (left, right, top, bottom), mode="replicate")
+        flows = _iterate(model, a, b, num_flow_updates, grad_updates, F.avg_pool2d(padded, 8) / 8)
+    elif grad_updates is None:
         flows = model(a, b, num_flow_updates=num_flow_updates)
     else:
         flows = truncated_raft(model, a, b, num_flow_updates, grad_updates)

@@ -31,7 +31,7 @@ import torch.nn.functional as F
 from torch import Tensor
 from torchvision.models.optical_flow import RAFT
 
-from .raft import context_state, encode_frames, predict_flow, prepare_pair, run_updates, unpad
+from .raft import predict_flow
 
 __all__ = ["boxes_from_points", "pair_boxes", "zoom_crop", "zoom_scale", "zoom_updates", "zoomed_flow",
            "box_motion", "shifted_crop", "scale_cap", "ZOOM_STARTS",
@@ -146,24 +146,11 @@ def zoomed_flow(model: RAFT, frame1: Tensor, frame2: Tensor, crop: Region, scale
             flow = predict_flow(model, _resize(a, size)[None], _resize(b, size)[None], updates)[0].float().cpu()
         else:
             moved = (start.float() - torch.tensor([dx, dy], dtype=torch.float32)[:, None, None]) * factor
-            flow = _warm_flow(model, _resize(a, size), _resize(b, size), _resize(moved, size), updates)
+            flow = predict_flow(model, _resize(a, size)[None], _resize(b, size)[None], updates,
+                                start=_resize(moved, size)[None])[0].float().cpu()
     finally:
         model.train(was_training)
     return _resize(flow, (h, w)) / factor + torch.tensor([dx, dy], dtype=torch.float32)[:, None, None]
-
-
-def _warm_flow(model: RAFT, image1: Tensor, image2: Tensor, start: Tensor, updates: int) -> Tensor:
-    """RAFT's flow (2, h, w) px of two images (3, h, w) uint8 with ``updates`` iterations from
-    ``start`` (2, h, w) px (replicate-padded like the images, averaged onto RAFT's 1/8 grid)."""
-    device = next(model.parameters()).device
-    a, b, pad = prepare_pair(image1.to(device), image2.to(device))
-    left, right, top, bottom = pad
-    padded = F.pad(start[None].to(device), (left, right, top, bottom), mode="replicate")
-    flow8 = F.avg_pool2d(padded, 8) / 8
-    fmap1, fmap2 = torch.chunk(encode_frames(model, torch.cat([a, b])), chunks=2, dim=0)
-    hidden, context = context_state(model, a)
-    flows, _ = run_updates(model, fmap1, fmap2, hidden, context, flow8, updates)
-    return unpad(flows[-1], pad)[0].float().cpu()
 
 
 def shifted_crop(crop: Region, shift: Tensor, size: tuple[int, int]) -> tuple[int, int]:
