@@ -30,12 +30,18 @@ LIGHTNING_INFO_LOGGERS = (
     "lightning.pytorch.accelerators.cuda",  # "LOCAL_RANK: 0 - CUDA_VISIBLE_DEVICES: [0]"
 )
 
-#: (message regex, category, module regex) of dependency warnings that say nothing to a user.
+#: (message regex, matched from the start, category, module regex) of dependency warnings that say nothing to a user.
 KNOWN_WARNINGS = (
     # torch >= 2.10 deprecates LeafSpec, which Lightning's pytree helper still builds (every Trainer run)
     (r"`isinstance\(treespec, LeafSpec\)` is deprecated", FutureWarning, r"lightning\.pytorch\.utilities\._pytree"),
     # lit-boot passes the command line to LightningCLI as args on purpose
     (r"LightningCLI's args parameter is intended to run from within Python", UserWarning, r"lightning\.pytorch\.cli"),
+    # on a GPU machine: the pose stages run on the CPU on purpose (pose_accelerator, a few thousand numbers)
+    (r"GPU available but not used", UserWarning, r"lightning\.pytorch\.trainer\.setup"),
+    # on a machine with more than 2 cores: lit-boot's datasets are tensors in memory, worker processes would only
+    # copy them (seen on the 16-core GPU machine, one warning per Trainer kind)
+    (r".* does not have many workers which may be a bottleneck", UserWarning,
+     r"lightning\.pytorch\.trainer\.connectors\.data_connector"),
 )
 
 

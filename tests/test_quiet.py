@@ -76,3 +76,31 @@ def test_keep_lightning_and_the_environment_keep_everything(monkeypatch) -> None
     monkeypatch.setenv("LIT_BOOT_VERBOSE", "0")
     with quiet_lightning():
         assert logger.getEffectiveLevel() == logging.WARNING
+
+
+def test_the_tips_of_a_gpu_machine_are_dropped(monkeypatch) -> None:
+    """On a many-core CUDA machine (the H200 of the GPU check) every run warned "GPU available but
+    not used" (the pose stage runs on the CPU on purpose) and "does not have many workers" (the
+    datasets are in-memory tensors). Here the machine is made to look like that one."""
+    import lightning as L
+    import torch
+    from lightning.pytorch.trainer import setup
+    from lightning.pytorch.trainer.connectors import data_connector
+
+    monkeypatch.setattr(setup.CUDAAccelerator, "is_available", staticmethod(lambda: True))
+    monkeypatch.setattr(data_connector, "suggested_max_num_workers", lambda devices: 15)
+    trainer = L.Trainer(accelerator="cpu", devices=1, logger=False, enable_progress_bar=False)
+    loader = torch.utils.data.DataLoader(torch.zeros(4, 2), num_workers=0)
+
+    def warned() -> list[str]:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with quiet_lightning():
+                setup._log_device_info(trainer)
+                data_connector._worker_check(trainer, loader, "train_dataloader")
+        return [str(w.message) for w in caught]
+
+    with keep_lightning():  # lit-boot --verbose: both show, so the check above is not vacuous
+        loud = warned()
+    assert any("GPU available but not used" in m for m in loud) and any("many workers" in m for m in loud), loud
+    assert warned() == []
