@@ -42,7 +42,7 @@ def test_the_current_results_come_first_and_the_check_catches_a_changed_figure()
     benchmarks = (ROOT / "BENCHMARKS.md").read_text()
     headings = re.findall(r"^##? .*$", benchmarks, re.M)
     assert headings[:2] == ["# Benchmarks", "## Current results"]
-    assert "No GPU figure has been" in current_results(benchmarks)
+    assert "### GPU (one NVIDIA H200" in current_results(benchmarks)  # the device is named
     readme = (ROOT / "README.md").read_text()
     quoted = sorted(f for f in figures(readme) if f.endswith("%"))[0]  # a figure the README quotes
     changed = f"{quoted[:-1]}01%"  # one more digit: a figure the current results do not hold
