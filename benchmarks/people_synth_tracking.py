@@ -11,7 +11,12 @@ the other people walk across, crossing and occluding person 0.
 
 Usage: python benchmarks/people_synth_tracking.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--jitter 0.05] [--miss 0.1] [--smoothing 0.5] [--keypoints]
-           [--pose-miss 0.3] [--keypoint-weight 1] [--json out.json]
+           [--pose-miss 0.3] [--keypoint-weight 1] [--no-stitch] [--json out.json] [--grid]
+
+``--grid`` prints one line instead of the table: the identity switches summed over the people of
+the scenes, "noisy" (5% jitter, 10% missed), "exact" (none) and "harder" (10%/20%, 5%/20% and
+10%/10%, summed) at pose-miss 0, then every condition's sum at pose-miss 0 / 0.3 / 0.6 and their
+total (BENCHMARKS.md, "Keypoints in the tracker"); --jitter, --miss and --pose-miss are then unused.
 """
 
 from __future__ import annotations
@@ -73,6 +78,37 @@ def score(tracks: torch.Tensor, dets: list[torch.Tensor], who: list[list[int]], 
     return rows
 
 
+GRID = {"noisy": [(0.05, 0.1)], "exact": [(0.0, 0.0)], "harder": [(0.1, 0.2), (0.05, 0.2), (0.1, 0.1)]}
+
+
+def switches(args: argparse.Namespace, jitter: float, miss: float, pose_miss: float) -> tuple[int, list[dict]]:
+    """The identity switches summed over every scene's people, and the scenes' rows."""
+    total, out = 0, []
+    for n in (int(v) for v in args.people.split(",")):
+        for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
+            scene = make_scene(frames=args.frames, height=128, width=256, motion=MOTIONS[i % len(MOTIONS)], seed=seed,
+                               people=n)  # fmt: skip
+            g = torch.Generator().manual_seed(seed)
+            dets, who, kps = detections_of(scene, jitter, miss, g)
+            kps = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= pose_miss) for k in kps]
+            options = {"smoothing": args.smoothing, "keypoint_weight": args.keypoint_weight}
+            tracks = track_people(dets, keypoints=kps if args.keypoints else None, stitch=not args.no_stitch,
+                                  **{k: v for k, v in options.items() if v is not None})  # fmt: skip
+            visible = torch.stack([p.person_boxes[:, 4] > 0 for p in scene.people()])
+            rows = score(tracks, dets, who, visible)
+            total += sum(r["switches"] for r in rows)
+            out.append({"people": n, "seed": seed, "tracks": int(tracks.shape[0]), "rows": rows})
+    return total, out
+
+
+def grid(args: argparse.Namespace) -> str:
+    cells = {(pm, name): sum(switches(args, j, m, pm)[0] for j, m in runs)
+             for pm in (0.0, 0.3, 0.6) for name, runs in GRID.items()}  # fmt: skip
+    per_miss = [sum(cells[(pm, name)] for name in GRID) for pm in (0.0, 0.3, 0.6)]
+    return (f"{cells[(0.0, 'noisy')]}, {cells[(0.0, 'exact')]}, {cells[(0.0, 'harder')]}; "
+            f"{per_miss[0]} / {per_miss[1]} / {per_miss[2]}, {sum(per_miss)}")  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--people", default="2,3")
@@ -85,26 +121,19 @@ def main() -> None:
     parser.add_argument("--pose-miss", type=float, default=0.0,
                         help="with --keypoints: the share of detections whose pose is not found (confidence 0)")
     parser.add_argument("--keypoint-weight", type=float, default=None, help="track_people's keypoint_weight")
+    parser.add_argument("--no-stitch", action="store_true", help="track_people(stitch=False)")
     parser.add_argument("--json", default=None)
+    parser.add_argument("--grid", action="store_true", help="the switches over the grid of conditions, one line")
     args = parser.parse_args()
+    if args.grid:
+        print(grid(args))
+        return
     print("| scene | person: visible frames, covered, identity switches | tracks |")
     print("| --- | --- | --- |")
-    out = []
-    for n in (int(v) for v in args.people.split(",")):
-        for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
-            scene = make_scene(frames=args.frames, height=128, width=256, motion=MOTIONS[i % len(MOTIONS)], seed=seed,
-                               people=n)  # fmt: skip
-            g = torch.Generator().manual_seed(seed)
-            dets, who, kps = detections_of(scene, args.jitter, args.miss, g)
-            kps = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= args.pose_miss) for k in kps]
-            options = {"smoothing": args.smoothing, "keypoint_weight": args.keypoint_weight}
-            tracks = track_people(dets, keypoints=kps if args.keypoints else None,
-                                  **{k: v for k, v in options.items() if v is not None})  # fmt: skip
-            visible = torch.stack([p.person_boxes[:, 4] > 0 for p in scene.people()])
-            rows = score(tracks, dets, who, visible)
-            out.append({"people": n, "seed": seed, "tracks": int(tracks.shape[0]), "rows": rows})
-            cells = "; ".join(f"{r['person']}: {r['visible']}, {r['covered']:.0%}, {r['switches']}" for r in rows)
-            print(f"| {n} people, s{seed} | {cells} | {tracks.shape[0]} |", flush=True)
+    total, out = switches(args, args.jitter, args.miss, args.pose_miss)
+    for scene in out:
+        cells = "; ".join(f"{r['person']}: {r['visible']}, {r['covered']:.0%}, {r['switches']}" for r in scene["rows"])
+        print(f"| {scene['people']} people, s{scene['seed']} | {cells} | {scene['tracks']} |", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps({"settings": vars(args), "scenes": out}, indent=1))
 

@@ -155,11 +155,11 @@ def followed(tracks: torch.Tensor, dets: list[torch.Tensor], owners: list[list[i
 
 
 def test_a_synthetic_crossing_keeps_both_ids():
-    """Each track follows one person, and each person is one track (with smoothing 0.5 the
-    hidden one split in three)."""
+    """Each track follows one person, and each person is one track (with smoothing 0.5 and no
+    stitching the hidden one split in three; the stitch joins its pieces again)."""
     dets, _, owners = synthetic_crossing(30)
-    for smoothing, whole in ((0.1, True), (0.5, False)):
-        who = followed(track_people(dets, smoothing=smoothing), dets, owners)
+    for smoothing, stitch, whole in ((0.1, True, True), (0.1, False, True), (0.5, False, False), (0.5, True, True)):
+        who = followed(track_people(dets, smoothing=smoothing, stitch=stitch), dets, owners)
         assert all(len(w) == 1 for w in who)
         assert (len(who) == 2 and sorted(min(w) for w in who) == [0, 1]) == whole
 
@@ -202,7 +202,7 @@ def test_the_keypoint_distance_is_per_frame_since_the_pose_was_seen(monkeypatch)
     keypoints = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= 0.5) for k in keypoints]
     assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}]
     monkeypatch.setattr(people_track, "KEYPOINT_PER_FRAME", False)
-    assert len(followed(track_people(dets, keypoints=keypoints), dets, owners)) == 3
+    assert len(followed(track_people(dets, keypoints=keypoints, stitch=False), dets, owners)) == 3
 
 
 def test_a_track_seen_a_frame_ago_goes_before_one_unseen_for_longer(monkeypatch):
@@ -230,3 +230,23 @@ def test_keypoints_are_checked_against_the_detections():
         track_people(dets, keypoints=keypoints, keypoint_weight=-1)
     empty = [torch.zeros(0, 5)] + dets[1:]
     assert track_people(empty, keypoints=[torch.zeros(0, 0, 3)] + keypoints[1:]).shape[0] == 2
+
+
+def test_a_track_that_a_shrunken_box_split_is_stitched_together():
+    """Three synthetic people (seed 34, walk, exact boxes, every pose found): person 1, behind
+    the other two, shows only a few joints: its box is 6 px by 11 px in frame 9 and 6 px by 46 px
+    in frame 10; the frame-by-frame link refuses a box over 2.5 times larger than the last and
+    starts a new track. The two tracklets (median sizes alike) meet within the link's reach, so
+    the stitch makes one track of them."""
+    from lit_boot.synth import make_scene
+
+    scene = make_scene(frames=16, height=128, width=256, motion="walk", seed=34, people=3)
+    boxes = torch.stack([p.person_boxes for p in scene.people()])  # (3, T, 5)
+    poses = torch.stack([torch.cat([p.keypoints2d, p.keypoints_conf[..., None]], -1) for p in scene.people()])
+    dets = [boxes[:, t][boxes[:, t, 4] > 0] for t in range(boxes.shape[1])]
+    owners = [(boxes[:, t, 4] > 0).nonzero()[:, 0].tolist() for t in range(boxes.shape[1])]
+    keypoints = [poses[owners[t], t] for t in range(boxes.shape[1])]
+    split = followed(track_people(dets, keypoints=keypoints, stitch=False), dets, owners)
+    assert sorted(split, key=min) == [{0}, {1}, {1}, {2}]
+    assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}, {2}]
+

@@ -17,7 +17,9 @@ and the track's velocity comes from its joints' median motion where it shares en
 the last frame (an occluder moves a box's centre, not the person).
 Leaving a track or a detection unmatched costs :data:`MISS_COST` each, so a good match is never
 traded for two poor ones. A track not seen for more than ``max_gap`` frames ends; an unmatched
-detection starts a new track. Tracks seen in fewer than ``min_frames`` frames (capped at T) are
+detection starts a new track. Then a track that starts just after another ends continues it
+where their motions meet within ``max_jump`` per frame (``stitch``: an occluded person's box
+shrinks or jumps, and the frame-by-frame link refuses it). Tracks seen in fewer than ``min_frames`` frames (capped at T) are
 dropped (a stray detection), gaps of at most ``max_gap`` frames are bridged by linear interpolation
 of the box and score, and the tracks are ordered by prominence (the sum over frames of box area x
 score): person 0 is the most prominent. Boxes are x0, y0, x1, y1 px with
@@ -197,6 +199,53 @@ def _link(detections: Sequence[torch.Tensor], keypoints: Sequence[torch.Tensor] 
     return tracks
 
 
+def _median_side(track: _Track) -> float:
+    return float(_side(torch.stack([b[:4] for b in track.boxes.values()])).median())
+
+
+def _stitch_cost(a: _Track, b: _Track, max_scale: float) -> float:
+    """How far tracklet ``b`` (starting after ``a`` ends) is from continuing ``a``: the distance
+    between a's box centre moved on by its velocity to b's first frame and b's first centre, and
+    between b's first centre moved back by b's velocity to a's last frame and a's last centre, the
+    larger, in median box sides (the larger of the two tracklets'); inf where their median sizes
+    differ by more than ``max_scale`` (an occluded person's box shrinks for a frame or two, so the
+    sizes of whole tracklets are compared, not of single boxes)."""
+    first = min(b.boxes)
+    side_a, side_b = _median_side(a), _median_side(b)
+    if max(side_a, side_b) / min(side_a, side_b) > max_scale:
+        return math.inf
+    gap = first - a.last
+    forward = _centre(a.boxes[a.last][:4]) + a.velocity * gap - _centre(b.boxes[first][:4])
+    b_velocity = b.velocity if len(b.boxes) > 1 else a.velocity
+    backward = _centre(b.boxes[first][:4]) - b_velocity * gap - _centre(a.boxes[a.last][:4])
+    return float(torch.maximum(forward.norm(), backward.norm())) / max(side_a, side_b)
+
+
+def _stitch(tracks: list[_Track], max_gap: int, max_scale: float, max_jump: float) -> list[_Track]:
+    """Tracklets joined where one starts within ``max_gap`` + 1 frames after another ended and
+    their motions meet within the link's own reach, ``max_jump`` box sides per frame of the gap
+    (:func:`_stitch_cost`), the closest pairs first (an optimal assignment per pass): the
+    frame-by-frame link refuses such a pair where an occluded person's box shrinks to its
+    visible part or jumps, comparing single boxes."""
+    while True:
+        cost = torch.full((len(tracks), len(tracks)), math.inf)
+        for i, a in enumerate(tracks):
+            for j, b in enumerate(tracks):
+                if 0 < (gap := min(b.boxes) - a.last) <= max_gap + 1:
+                    cost[i, j] = _stitch_cost(a, b, max_scale) / gap
+        pairs = _assign(cost.masked_fill(cost >= max_jump, math.inf), miss=max_jump)
+        if not pairs:
+            return tracks
+        for i, j in pairs:  # a and b distinct: b starts after a ends
+            a, b = tracks[i], tracks[j]
+            a.boxes.update(b.boxes)
+            a.last, a.velocity = b.last, b.velocity if len(b.boxes) > 1 else a.velocity
+            if b.keypoints is not None:
+                a.keypoints, a.keypoint_frame = b.keypoints, b.keypoint_frame
+            b.boxes = {}
+        tracks = [tr for tr in tracks if tr.boxes]
+
+
 def _dense(track: _Track, T: int, max_gap: int) -> torch.Tensor:
     """(T, 5) boxes and scores of a track, gaps of at most ``max_gap`` frames interpolated."""
     out = torch.zeros(T, 5)
@@ -222,6 +271,7 @@ def track_people(
     smoothing: float = SMOOTHING,
     keypoints: Sequence[torch.Tensor] | None = None,
     keypoint_weight: float = KEYPOINT_WEIGHT,
+    stitch: bool = True,
 ) -> torch.Tensor:
     """Every person's box in each frame, from per-frame detections (T tensors (N_t, 5): x0, y0,
     x1, y1 px, score, as :meth:`PersonDetector.detect_frames` gives them).
@@ -245,6 +295,13 @@ def track_people(
             frame the track has gone unseen beyond the last): who is who where two boxes
             overlap; and the track's velocity is its shared joints' median motion.
         keypoint_weight: see ``keypoints``; 0 ignores them.
+        stitch: after linking, a tracklet that starts within ``max_gap`` + 1 frames after another
+            ended continues it where the first one's box centre moved on by its velocity and the
+            second one's moved back by its own each come within ``max_jump`` box sides per frame
+            of the gap of the other's (each tracklet's median larger side, the larger of the two;
+            their median sizes within ``max_scale``), the closest pairs first: the frame-by-frame
+            link refuses such a pair where an occluded person's box shrinks to its visible part
+            or jumps (BENCHMARKS.md, "Stitching tracklets").
 
     Returns:
         (P, T, 5) float32: each track's box and score per frame (zeros where the person is
@@ -263,12 +320,14 @@ def track_people(
         raise ValueError(f"min_frames: expected a number of frames >= 1, got {min_frames!r}")
     if not keypoint_weight >= 0:
         raise ValueError(f"keypoint_weight: expected a number >= 0, got {keypoint_weight!r}")
+
     detections = check_detections(detections)
     keypoints = None if keypoints is None or keypoint_weight == 0 else _check_keypoints(keypoints, detections)
     T = len(detections)
-    tracks = [tr for tr in _link(detections, keypoints, max_gap, min_iou, max_jump, max_scale, smoothing,
-                                 keypoint_weight)
-              if len(tr.boxes) >= min(min_frames, T)]  # fmt: skip
+    linked = _link(detections, keypoints, max_gap, min_iou, max_jump, max_scale, smoothing, keypoint_weight)
+    if stitch:
+        linked = _stitch(linked, max_gap, max_scale, max_jump)
+    tracks = [tr for tr in linked if len(tr.boxes) >= min(min_frames, T)]
     if not tracks:
         return torch.zeros(0, T, 5)
     boxes = torch.stack([_dense(tr, T, max_gap) for tr in tracks])
