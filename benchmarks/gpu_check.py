@@ -54,16 +54,16 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
 def settings(args: argparse.Namespace) -> dict[str, Any]:
     """The sizes and options of each part: the real ones, or toy ones for ``--cpu-smoke``."""
     if args.cpu_smoke:
+        toy = ["--epochs", "1", "--pose-steps", "10", "--flow", '{"weights": null}']
         return {"device": "cpu", "precision": "bf16-mixed", "scene": dict(frames=3, height=64, width=96),
                 "flow": {"weights": None, "train_updates": 2, "predict_updates": 3}, "epochs": 1, "pose_steps": 10,
-                "speed": {"height": 64, "width": 96, "frames": 3, "extra": ["--epochs", "1", "--pose-steps", "10",
-                                                                          "--flow", '{"weights": null}']},
-            "speed_bar_size": {"height": 48, "width": 64, "frames": 3, "extra": ["--epochs", "1", "--pose-steps", "10",
-                                                                              "--flow", '{"weights": null}']}}  # fmt: skip
+                "speed": {"height": 64, "width": 96, "frames": 3, "extra": toy},
+                "speed_bar_size": {"height": 48, "width": 64, "frames": 3, "extra": toy}}  # fmt: skip
     return {"device": "cuda", "precision": "16-mixed", "scene": dict(frames=8, height=128, width=256),
             "flow": {"weights": args.weights}, "epochs": None, "pose_steps": 1500,
             "speed": {"height": 436, "width": 1024, "frames": 8, "extra": ["--weights", args.weights]},
-            "speed_bar_size": {"height": 128, "width": 256, "frames": 8, "extra": ["--weights", args.weights]}}  # fmt: skip
+            "speed_bar_size": {"height": 128, "width": 256, "frames": 8,
+                               "extra": ["--weights", args.weights]}}  # fmt: skip
 
 
 def run_options(s: dict[str, Any], precision: str) -> dict[str, Any]:
@@ -73,7 +73,8 @@ def run_options(s: dict[str, Any], precision: str) -> dict[str, Any]:
 
 def cuda_tests(s: dict[str, Any], tmp: Path) -> dict[str, Any]:
     done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider", "-k", "cuda",
-                           "--ignore", "tests/test_architecture.py", "tests"], cwd=ROOT, capture_output=True, text=True, timeout=1800)  # fmt: skip
+                           "--ignore", "tests/test_architecture.py", "tests"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=1800)  # fmt: skip
     return {"exit_status": done.returncode, "summary": done.stdout.strip().splitlines()[-1:]}
 
 

@@ -130,7 +130,7 @@ def main() -> None:
         return
     print("| scene | person: visible frames, covered, identity switches | tracks |")
     print("| --- | --- | --- |")
-    total, out = switches(args, args.jitter, args.miss, args.pose_miss)
+    _, out = switches(args, args.jitter, args.miss, args.pose_miss)
     for scene in out:
         cells = "; ".join(f"{r['person']}: {r['visible']}, {r['covered']:.0%}, {r['switches']}" for r in scene["rows"])
         print(f"| {scene['people']} people, s{scene['seed']} | {cells} | {scene['tracks']} |", flush=True)

@@ -125,20 +125,20 @@ def test_a_good_match_is_not_traded_for_two_poor_ones():
     assert tracks.shape[0] == 2 and (tracks[1, 3, 4] == 0) and (tracks[1, 1:3, 4] > 0).all()
 
 
-def synthetic_crossing(seed: int, motion: str = "walk", jitter: float = 0.0, miss: float = 0.0):
-    """Two people of a synthetic scene who cross (the far one hidden behind the near one, its
+def synthetic_crossing(seed: int, motion: str = "walk", jitter: float = 0.0, miss: float = 0.0, people: int = 2):
+    """Two (``people``) people of a synthetic scene who cross (the far one hidden behind the near one, its
     box shrinking to its visible part): their true boxes as detections (edges jittered by
     ``jitter`` x the box's larger side, each missed with probability ``miss``), shuffled in each
     frame, each one's simulated keypoints (x, y, confidence), and the true person of each."""
     from lit_boot.synth import make_scene
 
-    scene = make_scene(frames=16, height=128, width=256, motion=motion, seed=seed, people=2)
+    scene = make_scene(frames=16, height=128, width=256, motion=motion, seed=seed, people=people)
     boxes = torch.stack([p.person_boxes for p in scene.people()])  # (2, T, 5)
     poses = torch.stack([torch.cat([p.keypoints2d, p.keypoints_conf[..., None]], -1) for p in scene.people()])
     g = torch.Generator().manual_seed(0)
     dets, keypoints, owners = [], [], []
     for t in range(boxes.shape[1]):
-        order = [p for p in torch.randperm(2, generator=g).tolist() if torch.rand(1, generator=g).item() >= miss]
+        order = [p for p in torch.randperm(people, generator=g).tolist() if torch.rand(1, generator=g).item() >= miss]
         side = (boxes[order, t, 2:4] - boxes[order, t, :2]).amax(-1, keepdim=True)
         noisy = boxes[order, t, :4] + torch.randn(len(order), 4, generator=g) * jitter * side
         box = torch.cat([torch.minimum(noisy[:, :2], noisy[:, 2:]), torch.maximum(noisy[:, :2], noisy[:, 2:])], 1)
@@ -238,15 +238,7 @@ def test_a_track_that_a_shrunken_box_split_is_stitched_together():
     in frame 10; the frame-by-frame link refuses a box over 2.5 times larger than the last and
     starts a new track. The two tracklets (median sizes alike) meet within the link's reach, so
     the stitch makes one track of them."""
-    from lit_boot.synth import make_scene
-
-    scene = make_scene(frames=16, height=128, width=256, motion="walk", seed=34, people=3)
-    boxes = torch.stack([p.person_boxes for p in scene.people()])  # (3, T, 5)
-    poses = torch.stack([torch.cat([p.keypoints2d, p.keypoints_conf[..., None]], -1) for p in scene.people()])
-    dets = [boxes[:, t][boxes[:, t, 4] > 0] for t in range(boxes.shape[1])]
-    owners = [(boxes[:, t, 4] > 0).nonzero()[:, 0].tolist() for t in range(boxes.shape[1])]
-    keypoints = [poses[owners[t], t] for t in range(boxes.shape[1])]
+    dets, keypoints, owners = synthetic_crossing(34, people=3)
     split = followed(track_people(dets, keypoints=keypoints, stitch=False), dets, owners)
     assert sorted(split, key=min) == [{0}, {1}, {1}, {2}]
     assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}, {2}]
-

@@ -19,8 +19,8 @@ Leaving a track or a detection unmatched costs :data:`MISS_COST` each, so a good
 traded for two poor ones. A track not seen for more than ``max_gap`` frames ends; an unmatched
 detection starts a new track. Then a track that starts just after another ends continues it
 where their motions meet within ``max_jump`` per frame (``stitch``: an occluded person's box
-shrinks or jumps, and the frame-by-frame link refuses it). Tracks seen in fewer than ``min_frames`` frames (capped at T) are
-dropped (a stray detection), gaps of at most ``max_gap`` frames are bridged by linear interpolation
+shrinks or jumps, and the frame-by-frame link refuses it). Tracks seen in fewer than
+``min_frames`` frames (capped at T) are dropped (a stray detection), gaps of at most ``max_gap`` frames are bridged by linear interpolation
 of the box and score, and the tracks are ordered by prominence (the sum over frames of box area x
 score): person 0 is the most prominent. Boxes are x0, y0, x1, y1 px with
 pixel centres at integer coordinates (:mod:`.detector`).
@@ -203,6 +203,11 @@ def _median_side(track: _Track) -> float:
     return float(_side(torch.stack([b[:4] for b in track.boxes.values()])).median())
 
 
+def _end_velocity(a: _Track, b: _Track) -> torch.Tensor:
+    """The velocity of tracklet ``b`` continuing ``a``: b's own, or a's where b has one box (no motion yet)."""
+    return b.velocity if len(b.boxes) > 1 else a.velocity
+
+
 def _stitch_cost(a: _Track, b: _Track, max_scale: float) -> float:
     """How far tracklet ``b`` (starting after ``a`` ends) is from continuing ``a``: the distance
     between a's box centre moved on by its velocity to b's first frame and b's first centre, and
@@ -216,8 +221,7 @@ def _stitch_cost(a: _Track, b: _Track, max_scale: float) -> float:
         return math.inf
     gap = first - a.last
     forward = _centre(a.boxes[a.last][:4]) + a.velocity * gap - _centre(b.boxes[first][:4])
-    b_velocity = b.velocity if len(b.boxes) > 1 else a.velocity
-    backward = _centre(b.boxes[first][:4]) - b_velocity * gap - _centre(a.boxes[a.last][:4])
+    backward = _centre(b.boxes[first][:4]) - _end_velocity(a, b) * gap - _centre(a.boxes[a.last][:4])
     return float(torch.maximum(forward.norm(), backward.norm())) / max(side_a, side_b)
 
 
@@ -239,7 +243,7 @@ def _stitch(tracks: list[_Track], max_gap: int, max_scale: float, max_jump: floa
         for i, j in pairs:  # a and b distinct: b starts after a ends
             a, b = tracks[i], tracks[j]
             a.boxes.update(b.boxes)
-            a.last, a.velocity = b.last, b.velocity if len(b.boxes) > 1 else a.velocity
+            a.last, a.velocity = b.last, _end_velocity(a, b)
             if b.keypoints is not None:
                 a.keypoints, a.keypoint_frame = b.keypoints, b.keypoint_frame
             b.boxes = {}
@@ -320,7 +324,6 @@ def track_people(
         raise ValueError(f"min_frames: expected a number of frames >= 1, got {min_frames!r}")
     if not keypoint_weight >= 0:
         raise ValueError(f"keypoint_weight: expected a number >= 0, got {keypoint_weight!r}")
-
     detections = check_detections(detections)
     keypoints = None if keypoints is None or keypoint_weight == 0 else _check_keypoints(keypoints, detections)
     T = len(detections)
