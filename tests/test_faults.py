@@ -104,6 +104,28 @@ def test_both_optimisations_use_the_fused_adam_on_cpu():
     assert trained == {id(p) for p in model.raft.update_block.parameters()}
 
 
+def test_adam_on_cpu_steps_as_torch_without_asking_for_an_accelerator(monkeypatch):
+    """lit-boot's Adam skips torch's graph-capture check on CPU parameters (an NVML query per
+    step) and otherwise steps exactly as torch's."""
+    torch.manual_seed(0)
+    ours = torch.nn.Parameter(torch.randn(5))
+    theirs = torch.nn.Parameter(ours.detach().clone())
+    mine, reference = adam([ours], lr=0.1), torch.optim.Adam([theirs], lr=0.1, fused=True)
+    for _ in range(3):
+        for p, opt in ((ours, mine), (theirs, reference)):
+            opt.zero_grad()
+            (p**3).sum().backward()
+            opt.step()
+    assert torch.equal(ours, theirs) and not torch.equal(ours, torch.zeros(5))
+
+    def asked() -> bool:
+        raise AssertionError("the accelerator was queried")
+
+    monkeypatch.setattr(torch.accelerator, "is_available", asked)
+    with pytest.raises(AssertionError, match="queried"):
+        reference.step()  # torch's own Adam asks at every step
+    mine.step()
+
 def test_pose_refiner_keeps_the_last_finite_poses_at_a_nan_loss(tiny_scene):
     refiner = PoseRefiner(save=False)
     total_loss = refiner.total_loss
