@@ -149,12 +149,11 @@ class ZoomConfig:
     Args:
         method: None (the preset's: person in default, off in paper), off, or person.
         max_scale: the largest upsampling of the crop (but see ``small_scale``).
-        small_scale: a small person's crop may be upsampled more, up to this, as far as the
-            zoomed crop stays within ``max_cost`` frames of pixels (the same cost as a large
-            person's zoom); None (the default): ``max_scale`` for everyone. 4 helps small people
-            (BENCHMARKS.md, "Small people zoomed more"), but one validation scene's background
-            went over the no-harm bar with it, so it is not the default.
-        max_cost: see ``small_scale``: the zoomed crop's pixels, in frames.
+        small_scale: a small person's crop may be upsampled more, up to this (4), as far as
+            the zoomed crop stays within ``max_cost`` frames of pixels; None: ``max_scale`` for
+            everyone. A large person's crop is zoomed ``max_scale`` as before (BENCHMARKS.md,
+            "Small people zoomed more, the default").
+        max_cost: see ``small_scale``: the zoomed crop's pixels, in frames (2).
         min_scale: a pair whose scale would be below this is not zoomed: its motion is close to
             RAFT's reach at the zoomed size, where the zoom does harm (market_5 at full size,
             zoomed 1.25x: +1.7%; BENCHMARKS.md, "Resolution where the person is").
@@ -188,8 +187,8 @@ class ZoomConfig:
 
     method: str | None = None
     max_scale: float = 2.0
-    small_scale: float | None = None
-    max_cost: float = 1.0
+    small_scale: float | None = 4.0
+    max_cost: float = 2.0
     min_scale: float = 1.5
     reach_px: float = 60.0
     context: float = 0.5
