@@ -352,22 +352,27 @@ def test_console_error_is_one_line_even_from_ffmpeg(tmp_path: Path) -> None:
 
 
 def test_memory_estimate_and_advice(monkeypatch: pytest.MonkeyPatch) -> None:
-    """300 frames of 720p against 8 GiB: the error gives the need, its parts, and options that fit."""
+    """300 frames of 720p against 12 GiB: the error gives the need, its parts, and options that fit."""
+    pyramid = lambda cells: cells**2 * 4 * 4 // 3  # noqa: E731  RAFT's correlation pyramid, bytes
     need = memory.estimate_memory(300, 720, 1280)
     assert need.frames == 300 * 720 * 1280 * 3 and need.flows == 2 * 299 * 2 * 720 * 1280 * 4
-    assert need.model == 3 * (90 * 160) ** 2 * 4 * 4 // 3 + 256 * 2**20  # RAFT's pyramid at 1/8
-    monkeypatch.setattr(memory, "available_memory", lambda: 8 * 2**30)
+    # the zoom stage's crop (four frames of pixels, at most ZOOM_PIXELS) outweighs the fine-tune's three pyramids
+    assert need.model == pyramid(2**21 // 64) * 8 // 5 + 256 * 2**20 > 3 * pyramid(90 * 160) + 256 * 2**20
+    # at 1080p the fine-tune's pyramids (at 1/8 of the frame) are the larger; at 128x256 the zoom's four frames
+    assert memory.estimate_memory(2, 1080, 1920).model == 3 * pyramid(135 * 240) + 256 * 2**20
+    assert memory.estimate_memory(2, 128, 256).model == pyramid(4 * 128 * 256 // 64) * 8 // 5 + 256 * 2**20
+    monkeypatch.setattr(memory, "available_memory", lambda: 12 * 2**30)
     with pytest.raises(memory.NotEnoughMemoryError) as info:
         memory.check_memory("clip.mp4", 300, 720, 1280, advice="try")
     message = str(info.value)
-    assert re.match(r"clip\.mp4: 300 frames of 1280x720 px need about 8\.\d GiB of memory \(frames 791 MiB, flows "
-                    r"4\.\d GiB, RAFT 3\.\d GiB\) but 8\.0 GiB is available; try --stride", message), message
+    assert re.match(r"clip\.mp4: 300 frames of 1280x720 px need about 13\.\d GiB of memory \(frames 791 MiB, flows "
+                    r"4\.\d GiB, RAFT 8\.\d GiB\) but 12\.0 GiB is available; try --stride", message), message
     options = re.findall(r"--(stride|max_frames|resize) (\d+)", message)
     assert [o for o, _ in options] == ["stride", "max_frames", "resize"]
     for option, n in options:  # each suggestion fits
         T, H, W = {"stride": (math.ceil(300 / int(n)), 720, 1280), "max_frames": (int(n), 720, 1280),
                    "resize": (300, int(n), round(1280 * int(n) / 720))}[option]  # fmt: skip
-        assert memory.estimate_memory(T, H, W).total <= 8 * 2**30, option
+        assert memory.estimate_memory(T, H, W).total <= 12 * 2**30, option
     memory.check_memory("clip.mp4", 30, 360, 640)  # fits: no error
     monkeypatch.setenv(memory.MEMORY_CHECK_ENV, "0")
     memory.check_memory("clip.mp4", 300, 720, 1280)  # the check turned off

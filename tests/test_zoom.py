@@ -349,3 +349,30 @@ def test_a_small_persons_crop_is_zoomed_more_at_the_same_cost(monkeypatch):
     assert zoom_pair(None, frames[0], frames[1], fast, box, **ZOOM, small_scale=4.0).scale == pytest.approx(3.0)
     with pytest.raises(ValueError, match="zoom.small_scale"):
         ZoomConfig(small_scale=1.5)
+
+
+def test_the_zoomed_crop_keeps_within_max_pixels(monkeypatch):
+    """RAFT's correlation memory grows with the square of the zoomed pixels: ``max_pixels`` bounds
+    them whatever the person's size, and a pair it would zoom less than min_scale is not zoomed."""
+    from lit_boot.data.memory import ZOOM_PIXELS
+
+    frames = torch.zeros(2, 3, 200, 400, dtype=torch.uint8)
+    seen = {}
+
+    def fake(model, a, b, crop, scale, updates, *rest):
+        seen["pixels"] = (crop[1] - crop[0]) * (crop[3] - crop[2]) * scale**2
+        return torch.zeros(2, crop[1] - crop[0], crop[3] - crop[2])
+
+    monkeypatch.setattr(flow_zoom, "zoomed_flow", fake)
+    base, box = torch.zeros(2, 200, 400), torch.tensor([150.0, 50.0, 250.0, 150.0])  # a 100 px person
+    assert zoom_pair(None, frames[0], frames[1], base, box, **ZOOM).scale == 2.0  # no limit: 90000 px
+    bounded = zoom_pair(None, frames[0], frames[1], base, box, **ZOOM, max_pixels=50_000)
+    y0, y1, x0, x1 = bounded.crop  # about 150 x 150 px
+    assert bounded.scale < 2.0 and bounded.scale == pytest.approx((50_000 / ((y1 - y0) * (x1 - x0))) ** 0.5)
+    assert seen["pixels"] == pytest.approx(50_000)
+    assert zoom_pair(None, frames[0], frames[1], base, box, **ZOOM, max_pixels=30_000).scale == 1.0  # < 1.25x
+    small = torch.tensor([190.0, 90.0, 210.0, 110.0])  # a small person zoomed up to small_scale: bounded too
+    assert zoom_pair(None, frames[0], frames[1], base, small, **ZOOM, small_scale=4.0, max_pixels=10_000).scale < 2.0
+    assert ZoomConfig().max_pixels == ZOOM_PIXELS  # the memory check assumes the default
+    with pytest.raises(ValueError, match="zoom.max_pixels"):
+        ZoomConfig(max_pixels=0)

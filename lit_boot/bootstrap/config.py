@@ -154,6 +154,11 @@ class ZoomConfig:
             everyone. A large person's crop is zoomed ``max_scale`` as before (BENCHMARKS.md,
             "Small people zoomed more, the default").
         max_cost: see ``small_scale``: the zoomed crop's pixels, in frames (2).
+        max_pixels: the zoomed crop's pixels at most, whatever the scale (2**21, e.g. 1448 x
+            1448): RAFT's all-pairs correlation memory grows with their square (8.2 GiB measured
+            at this many); a pair whose scale would fall below ``min_scale`` is not zoomed.
+            None: no limit (a large person's crop zoomed 2x in a 1080p frame can need tens of
+            GiB). Kept equal to lit_boot.data.memory.ZOOM_PIXELS, which the memory check uses.
         min_scale: a pair whose scale would be below this is not zoomed: its motion is close to
             RAFT's reach at the zoomed size, where the zoom does harm (market_5 at full size,
             zoomed 1.25x: +1.7%; BENCHMARKS.md, "Resolution where the person is").
@@ -189,6 +194,7 @@ class ZoomConfig:
     max_scale: float = 2.0
     small_scale: float | None = 4.0
     max_cost: float = 2.0
+    max_pixels: int | None = 2**21
     min_scale: float = 1.5
     reach_px: float = 60.0
     context: float = 0.5
@@ -218,6 +224,8 @@ class ZoomConfig:
         if self.small_scale is not None and not self.small_scale >= self.max_scale:
             raise ValueError(f"zoom.small_scale: expected None or >= max_scale ({self.max_scale}), "
                              f"got {self.small_scale}")  # fmt: skip
+        if self.max_pixels is not None and not self.max_pixels > 0:
+            raise ValueError(f"zoom.max_pixels: expected None or > 0, got {self.max_pixels}")
         for name in ("reach_px", "max_change_px", "context", "max_cost"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"zoom.{name}: expected > 0, got {getattr(self, name)}")

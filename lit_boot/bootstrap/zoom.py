@@ -106,7 +106,8 @@ def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: Z
                            min_scale=config.min_scale, reach_px=config.reach_px, context=config.context,
                            min_context_px=config.min_context_px, border_px=config.border_px,
                            min_updates=config.updates, max_updates=config.max_updates,
-                           start=config.start, small_scale=config.small_scale, max_cost=config.max_cost)  # fmt: skip
+                           start=config.start, small_scale=config.small_scale, max_cost=config.max_cost,
+                           max_pixels=config.max_pixels)  # fmt: skip
         record = zoomed.record()
         if zoomed.region is not None:
             kept[t] = keep_pixels(frames[t : t + 2], base[t], zoomed.candidate, zoomed.region, config)

@@ -6,7 +6,10 @@ The estimate for T frames of H x W px (what running the method on them holds at 
 - flows: 2 x (T-1) x 2 x H x W x 4 bytes (float32; RAFT's initial flow and the current one);
 - RAFT's working memory: its all-pairs correlation pyramid for one pair, (h x w)^2 x 4 bytes
   x 4/3 with h, w the sides / 8 after padding to at least 128 px, three times over while
-  fine-tuning (forward, gradient, pyramid), plus 256 MiB for the network and optimiser.
+  fine-tuning (forward, gradient, pyramid), or the zoom stage's inference on a zoomed crop of up
+  to four frames of pixels and at most :data:`ZOOM_PIXELS`, 1.6 times its pyramid (measured,
+  RAFT-small on the CPU: 2.1 GiB at 1024 x 1024 px, 8.2 GiB at 1448 x 1448), whichever is
+  larger; plus 256 MiB for the network and optimiser.
 
 Available memory: ``MemAvailable`` of /proc/meminfo, else free pages x page size; unknown
 means no check. ``LIT_BOOT_MEMORY_CHECK=0`` turns the check off.
@@ -18,13 +21,16 @@ import math
 import os
 from dataclasses import dataclass
 
-__all__ = ["MEMORY_CHECK_ENV", "MemoryEstimate", "NotEnoughMemoryError", "available_memory", "check_memory",
-           "estimate_memory", "format_bytes"]  # fmt: skip
+__all__ = ["MEMORY_CHECK_ENV", "ZOOM_PIXELS", "MemoryEstimate", "NotEnoughMemoryError", "available_memory",
+           "check_memory", "estimate_memory", "format_bytes"]  # fmt: skip
 
 MEMORY_CHECK_ENV = "LIT_BOOT_MEMORY_CHECK"
 _MODEL_BASE = 256 * 2**20
 _RAFT_MIN_SIDE = 128
 _RESIZE_HEIGHTS = (1080, 720, 540, 480, 360, 288, 240, 180, 128)
+#: The zoom stage's default limit on a zoomed crop's pixels (lit_boot.bootstrap.config.ZoomConfig's
+#: max_pixels, spelled there too: the config module imports nothing of the library's data layer).
+ZOOM_PIXELS = 2**21
 
 
 class NotEnoughMemoryError(ValueError):
@@ -63,9 +69,11 @@ def estimate_memory(num_frames: int, height: int, width: int) -> MemoryEstimate:
     """The estimate (module docstring) for ``num_frames`` frames of ``width`` x ``height`` px."""
     T, H, W = int(num_frames), int(height), int(width)
     cells = math.ceil(max(H, _RAFT_MIN_SIDE) / 8) * math.ceil(max(W, _RAFT_MIN_SIDE) / 8)
-    pyramid = cells * cells * 4 * 4 // 3
+    zoom_cells = min(4 * H * W, ZOOM_PIXELS) // 64
+    pyramid = lambda n: n * n * 4 * 4 // 3  # noqa: E731
     flows = 2 * max(T - 1, 0) * 2 * H * W * 4
-    return MemoryEstimate(frames=T * H * W * 3, flows=flows, model=3 * pyramid + _MODEL_BASE)
+    model = max(3 * pyramid(cells), pyramid(zoom_cells) * 8 // 5) + _MODEL_BASE
+    return MemoryEstimate(frames=T * H * W * 3, flows=flows, model=model)
 
 
 def format_bytes(n: float) -> str:

@@ -216,10 +216,11 @@ def scale_cap(crop: Region, size: tuple[int, int], *, max_scale: float, small_sc
 def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Tensor | None, *, max_scale: float,
               min_scale: float, reach_px: float, context: float, min_context_px: int, border_px: int,
               min_updates: int, max_updates: int, start: str = "zero", small_scale: float | None = None,
-              max_cost: float = 1.0) -> ZoomedPair:  # fmt: skip
+              max_cost: float = 1.0, max_pixels: int | None = None) -> ZoomedPair:  # fmt: skip
     """The zoom of one pair: frames (3, H, W) uint8, ``base`` (2, H, W) px RAFT's own flow, the
     pair's person box (4,) or None (nobody: not zoomed); the scale from :func:`zoom_scale`, at most
-    :func:`scale_cap` (``small_scale`` None: ``max_scale``), the crop from :func:`zoom_crop`,
+    :func:`scale_cap` (``small_scale`` None: ``max_scale``) and by ``max_pixels`` (the zoomed
+    crop's pixels at most; None: no limit), the crop from :func:`zoom_crop`,
     pasted into :func:`paste_region` (``border_px``), the RAFT
     iterations on the zoomed crop from :func:`zoom_updates`. ``start``: ``zero`` (RAFT from zero
     on the same crop of both frames), ``shift`` (frame2's crop follows the person's typical
@@ -235,6 +236,8 @@ def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Te
     relative_to = None if start == "zero" else torch.tensor(shift, dtype=torch.float32)
     if small_scale is not None:
         max_scale = scale_cap(crop, size, max_scale=max_scale, small_scale=small_scale, max_cost=max_cost)
+    if max_pixels is not None:  # RAFT's correlation memory grows with the square of the zoomed pixels
+        max_scale = min(max_scale, math.sqrt(max_pixels / max(1, (crop[1] - crop[0]) * (crop[3] - crop[2]))))
     scale, motion = zoom_scale(base, box, max_scale=max_scale, min_scale=min_scale, reach_px=reach_px,
                                relative_to=relative_to)  # fmt: skip
     region = paste_region(crop, size, border_px)
