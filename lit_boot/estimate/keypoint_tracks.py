@@ -26,8 +26,8 @@ __all__ = ["link_keypoint_people", "read_tracked_estimates"]
 
 def link_keypoint_people(people: Sequence[Sequence[np.ndarray]], scores: Sequence[Sequence[float]] | None = None,
                          **tracker: Any) -> list[list[int]]:  # fmt: skip
-    """The track of each detection: people[t][i] (K, 3) [x, y, confidence] -> labels[t][i], the
-    index of its track (most prominent first) or -1 (no keypoint found, or a stray detection the
+    """The track of each detection: ``people[t][i]`` (K, 3) (x, y, confidence) -> ``labels[t][i]``,
+    the index of its track (most prominent first) or -1 (no keypoint found, or a stray detection the
     tracker dropped). ``scores``: detection scores (default: the mean keypoint confidence);
     ``tracker``: :func:`~.people_track.track_people` options."""
     detections, keypoints, index = [], [], []
