@@ -126,6 +126,7 @@ def test_adam_on_cpu_steps_as_torch_without_asking_for_an_accelerator(monkeypatc
         reference.step()  # torch's own Adam asks at every step
     mine.step()
 
+
 def test_pose_refiner_keeps_the_last_finite_poses_at_a_nan_loss(tiny_scene):
     refiner = PoseRefiner(save=False)
     total_loss = refiner.total_loss
