@@ -8,10 +8,12 @@ a track is ``1 - IoU`` with the predicted box when they overlap by at least ``mi
 ``1 + d / reach`` when the centres are ``d`` px apart within ``reach`` = ``max_jump`` x the box's larger
 side x the frames since it was last seen; a detection further away, or more than ``max_scale``
 times larger or smaller (larger side), is not that track's. Where the detections come with
-keypoints (each one's pose), the median distance of the shared confident joints from the track's
-last keypoints moved on by its velocity, in box sides per frame since those keypoints were seen
-(at most 1), x ``keypoint_weight`` is added, and :data:`KEYPOINT_GAP_COST` per frame the track has
-gone unseen beyond the last (a track seen a frame ago goes first):
+keypoints (each one's pose), ``keypoint_weight`` x a pose distance is added: the median distance
+of the shared confident joints from the track's last keypoints moved on by its velocity, in box
+sides per frame since those keypoints were seen, plus :data:`KEYPOINT_SHAPE_WEIGHT` x how much
+farther the pose's shape (the shared joints about their mean) is from the track's than from the
+best-shaped track's for the same detection, at most 1 in all; and :data:`KEYPOINT_GAP_COST` per
+frame the track has gone unseen beyond the last (a track seen a frame ago goes first):
 where one person's box lies inside another's during a crossing, the joints still say who is who;
 and the track's velocity comes from its joints' median motion where it shares enough of them with
 the last frame (an occluder moves a box's centre, not the person).
@@ -64,6 +66,10 @@ KEYPOINT_PER_FRAME = True
 #: last. A track seen a frame ago predicts better than one unseen for longer, whose keypoint
 #: distance (per frame since seen) is also cheap (BENCHMARKS.md, "Keypoints in the tracker").
 KEYPOINT_GAP_COST = 0.3
+#: Where the detections come with keypoints: the weight of a pair's pose-shape distance (box
+#: sides) beyond the best-shaped track's for the same detection, added to the keypoint distance
+#: (BENCHMARKS.md, "The pose's shape in the tracker").
+KEYPOINT_SHAPE_WEIGHT = 1.0
 
 
 @dataclass
@@ -123,22 +129,32 @@ def _iou_matrix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return inter / (area(a)[:, None] + area(b)[None, :] - inter).clamp_min(1e-9)
 
 
-def _keypoint_distance(tracks: list[_Track], t: int, keypoints: torch.Tensor, side: torch.Tensor) -> torch.Tensor:
-    """(N_tracks, N_dets): the median distance between each track's predicted keypoints and each
+def _keypoint_distance(tracks: list[_Track], t: int, keypoints: torch.Tensor,
+                       side: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """Two (N_tracks, N_dets) distances between each track's predicted keypoints and each
     detection's ``keypoints`` (N_dets, K, 3), over the joints confident (> :data:`KEYPOINT_CONF`)
-    in both, in units of the predicted box's larger side ``side`` (N_tracks,) per frame since the
-    track's keypoints were seen (a pose unseen for a while is a looser prediction); NaN where fewer
-    than :data:`KEYPOINT_MIN_JOINTS` joints are shared (or a track has no keypoints yet)."""
+    in both, in units of the predicted box's larger side ``side`` (N_tracks,); NaN where fewer than
+    :data:`KEYPOINT_MIN_JOINTS` joints are shared (or a track has no keypoints yet):
+
+    - where: the median distance of the joints, per frame since the track's keypoints were seen
+      (a pose unseen for a while is a looser prediction);
+    - shape: the median distance of the joints once each pose's shared joints are centred on
+      their mean (the pose's layout, wherever it is: where two people overlap, their joints'
+      places coincide, their layouts do not)."""
     K = keypoints.shape[1]
     pred = torch.stack([p if (p := tr.predicted_keypoints(t)) is not None and p.shape[0] == K
                         else torch.zeros(K, 3) for tr in tracks])  # fmt: skip
     shared = (pred[:, None, :, 2] > KEYPOINT_CONF) & (keypoints[None, :, :, 2] > KEYPOINT_CONF)
-    dist = (pred[:, None, :, :2] - keypoints[None, :, :, :2]).norm(dim=-1) / side[:, None, None]
-    median = dist.masked_fill(~shared, math.nan).nanmedian(dim=-1).values
+    offset = pred[:, None, :, :2] - keypoints[None, :, :, :2]  # (N_tracks, N_dets, K, 2)
+    weight = shared[..., None].float()
+    centred = offset - (offset * weight).sum(-2, keepdim=True) / weight.sum(-2, keepdim=True).clamp_min(1.0)
+    few = shared.sum(-1) < KEYPOINT_MIN_JOINTS
+    where, shape = ((d.norm(dim=-1) / side[:, None, None]).masked_fill(~shared, math.nan).nanmedian(dim=-1).values
+                    for d in (offset, centred))  # fmt: skip
     if KEYPOINT_PER_FRAME:
         age = torch.tensor([float(t - tr.keypoint_frame) if tr.keypoints is not None else 1.0 for tr in tracks])
-        median = median / age[:, None].clamp_min(1.0)
-    return median.masked_fill(shared.sum(-1) < KEYPOINT_MIN_JOINTS, math.nan)
+        where = where / age[:, None].clamp_min(1.0)
+    return where.masked_fill(few, math.nan), shape.masked_fill(few, math.nan)
 
 
 def _costs(tracks: list[_Track], t: int, dets: torch.Tensor, min_iou: float, max_jump: float,
@@ -154,7 +170,11 @@ def _costs(tracks: list[_Track], t: int, dets: torch.Tensor, min_iou: float, max
     ratio = _side(pred)[:, None] / _side(dets[:, :4])[None]
     far = (iou < min_iou) & (dist > reach)
     if keypoints is not None and keypoint_weight > 0:
-        pose = _keypoint_distance(tracks, t, keypoints, _side(pred))
+        where, shape = _keypoint_distance(tracks, t, keypoints, _side(pred))
+        # the shape against the best-shaped track's for the same detection: it ranks the tracks,
+        # and a pair whose shape cannot be measured is neither favoured nor penalised by it
+        best = torch.nan_to_num(shape, nan=math.inf).amin(0, keepdim=True)
+        pose = where + KEYPOINT_SHAPE_WEIGHT * (shape - best)
         cost = cost + keypoint_weight * torch.nan_to_num(pose.clamp_max(1.0), nan=0.0)
         cost = cost + KEYPOINT_GAP_COST * (gap[:, None] - 1)
     return cost.masked_fill(far | (ratio > max_scale) | (ratio < 1 / max_scale), math.inf)
@@ -296,8 +316,11 @@ def track_people(
             between the track's keypoints (moved on by its velocity) and the detection's, in box
             sides per frame since the track's keypoints were seen (at most 1), x
             ``keypoint_weight`` is added to the pair's cost (and :data:`KEYPOINT_GAP_COST` per
-            frame the track has gone unseen beyond the last): who is who where two boxes
-            overlap; and the track's velocity is its shared joints' median motion.
+            frame the track has gone unseen beyond the last), with the pose's shape (the shared
+            joints about their mean) beyond the best-shaped track's for the detection in the
+            same term: who is who where two boxes overlap, and where two people's joints
+            coincide, which layout is whose; the track's velocity is its shared joints' median
+            motion.
         keypoint_weight: see ``keypoints``; 0 ignores them.
         stitch: after linking, a tracklet that starts within ``max_gap`` + 1 frames after another
             ended continues it where the first one's box centre moved on by its velocity and the
