@@ -3,6 +3,7 @@
 import pytest
 import torch
 
+import lit_boot.estimate.people_track as people_track
 from lit_boot.estimate.people_track import parse_people, select_people, track_people
 
 
@@ -182,8 +183,6 @@ def test_the_joints_give_the_velocity_where_an_occluder_moves_the_box(monkeypatc
     velocity from the box centres then carries the track onto the other person. From the joints
     (their median motion) each person is one track (the pose's shape in the cost, which also
     keeps them apart here, left out)."""
-    import lit_boot.estimate.people_track as people_track
-
     dets, keypoints, owners = synthetic_crossing(39, jitter=0.1, miss=0.1)
     assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}]
     monkeypatch.setattr(people_track, "KEYPOINT_SHAPE_WEIGHT", 0.0)
@@ -198,8 +197,6 @@ def test_the_keypoint_distance_is_per_frame_since_the_pose_was_seen(monkeypatch)
     so in frame 9 its track's keypoints are 4 frames old. Their raw distance from its own
     detection then costs more than a miss and the track splits in two; per frame since the pose
     was seen, each person is one track."""
-    import lit_boot.estimate.people_track as people_track
-
     dets, keypoints, owners = synthetic_crossing(30)
     g = torch.Generator().manual_seed(1)
     keypoints = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= 0.5) for k in keypoints]
@@ -213,8 +210,6 @@ def test_a_track_seen_a_frame_ago_goes_before_one_unseen_for_longer(monkeypatch)
     is missed and person 0's detection has no pose. Person 1's track, unseen since frame 6, is
     nearer to it by its box than person 0's own track (seen in frame 7) and, without the cost per
     frame unseen, takes it: a switch."""
-    import lit_boot.estimate.people_track as people_track
-
     dets, keypoints, owners = synthetic_crossing(49, jitter=0.1, miss=0.1)
     g = torch.Generator().manual_seed(1)
     keypoints = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= 0.5) for k in keypoints]
@@ -253,8 +248,6 @@ def test_the_poses_shape_tells_two_overlapping_people_apart(monkeypatch):
     track starts and the orphaned one takes person 0's detection in frame 7. The pose's shape
     (its joints about their mean, wherever it is) ranks the tracks where the joints' places
     coincide: every track follows one person. Without it, a track covers two people."""
-    import lit_boot.estimate.people_track as people_track
-
     dets, keypoints, owners = synthetic_crossing(35, motion="run", people=3)
     assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}, {2}]
     monkeypatch.setattr(people_track, "KEYPOINT_SHAPE_WEIGHT", 0.0)
@@ -264,8 +257,6 @@ def test_the_poses_shape_tells_two_overlapping_people_apart(monkeypatch):
 def test_the_shape_term_ranks_tracks_and_leaves_unmeasured_pairs_alone():
     """The shape distance is translation-free, and a pair whose shape cannot be measured (too few
     shared joints) pays nothing for it."""
-    import lit_boot.estimate.people_track as people_track
-
     pose = torch.tensor([[10.0, 10.0, 1.0], [20.0, 10.0, 1.0], [15.0, 30.0, 1.0], [15.0, 50.0, 1.0]])
     moved = pose + torch.tensor([7.0, -3.0, 0.0])
     other = pose.clone()

@@ -203,14 +203,19 @@ class ZoomedPair:
                 "shift": list(self.shift)}  # fmt: skip
 
 
-def scale_cap(crop: Region, size: tuple[int, int], *, max_scale: float, small_scale: float,
-              max_cost: float) -> float:  # fmt: skip
+def scale_cap(crop: Region, size: tuple[int, int], *, max_scale: float, small_scale: float | None = None,
+              max_cost: float = 1.0, max_pixels: int | None = None) -> float:  # fmt: skip
     """The largest scale for a crop (y0, y1, x0, x1) of a frame of ``size`` (H, W): ``max_scale``,
-    or more for a small person, up to ``small_scale``, as far as the zoomed crop stays within
-    ``max_cost`` frames of pixels (a small person is zoomed more at the same cost as a large one)."""
+    or more for a small person, up to ``small_scale`` (None: no more), as far as the zoomed crop
+    stays within ``max_cost`` frames of pixels (a small person is zoomed more at the same cost as a
+    large one); and whatever the person's size, no more than keeps the zoomed crop within
+    ``max_pixels`` (None: no limit; RAFT's correlation memory grows with their square)."""
     y0, y1, x0, x1 = crop
     area = max(1, (y1 - y0) * (x1 - x0))
-    return max(max_scale, min(small_scale, math.sqrt(max_cost * size[0] * size[1] / area)))
+    cap = max_scale
+    if small_scale is not None:
+        cap = max(max_scale, min(small_scale, math.sqrt(max_cost * size[0] * size[1] / area)))
+    return cap if max_pixels is None else min(cap, math.sqrt(max_pixels / area))
 
 
 def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Tensor | None, *, max_scale: float,
@@ -219,8 +224,8 @@ def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Te
               max_cost: float = 1.0, max_pixels: int | None = None) -> ZoomedPair:  # fmt: skip
     """The zoom of one pair: frames (3, H, W) uint8, ``base`` (2, H, W) px RAFT's own flow, the
     pair's person box (4,) or None (nobody: not zoomed); the scale from :func:`zoom_scale`, at most
-    :func:`scale_cap` (``small_scale`` None: ``max_scale``) and by ``max_pixels`` (the zoomed
-    crop's pixels at most; None: no limit), the crop from :func:`zoom_crop`,
+    :func:`scale_cap` (``small_scale`` None: ``max_scale``; ``max_pixels`` None: no limit), the
+    crop from :func:`zoom_crop`,
     pasted into :func:`paste_region` (``border_px``), the RAFT
     iterations on the zoomed crop from :func:`zoom_updates`. ``start``: ``zero`` (RAFT from zero
     on the same crop of both frames), ``shift`` (frame2's crop follows the person's typical
@@ -234,10 +239,8 @@ def zoom_pair(model: RAFT, frame1: Tensor, frame2: Tensor, base: Tensor, box: Te
     crop = zoom_crop(box, size, context=context, min_context_px=min_context_px)
     shift = (0, 0) if start == "zero" else shifted_crop(crop, box_motion(base, box), size)
     relative_to = None if start == "zero" else torch.tensor(shift, dtype=torch.float32)
-    if small_scale is not None:
-        max_scale = scale_cap(crop, size, max_scale=max_scale, small_scale=small_scale, max_cost=max_cost)
-    if max_pixels is not None:  # RAFT's correlation memory grows with the square of the zoomed pixels
-        max_scale = min(max_scale, math.sqrt(max_pixels / max(1, (crop[1] - crop[0]) * (crop[3] - crop[2]))))
+    max_scale = scale_cap(crop, size, max_scale=max_scale, small_scale=small_scale, max_cost=max_cost,
+                          max_pixels=max_pixels)  # fmt: skip
     scale, motion = zoom_scale(base, box, max_scale=max_scale, min_scale=min_scale, reach_px=reach_px,
                                relative_to=relative_to)  # fmt: skip
     region = paste_region(crop, size, border_px)
