@@ -104,3 +104,38 @@ def test_the_tips_of_a_gpu_machine_are_dropped(monkeypatch) -> None:
         loud = warned()
     assert any("GPU available but not used" in m for m in loud) and any("many workers" in m for m in loud), loud
     assert warned() == []
+
+
+def test_a_skipped_training_step_is_not_a_warning(monkeypatch) -> None:
+    """FlowTTT returns None from ``training_step`` for a batch with nothing to learn (no person's
+    box in it); Lightning warns "If this was on purpose, ignore this warning", once per run (seen in
+    the Sintel benchmark's runs from Python)."""
+    import lightning as L
+    import torch
+    from lightning.pytorch.loops.optimization import automatic
+    from lightning.pytorch.utilities.rank_zero import WarningCache
+
+    class Skips(L.LightningModule):
+        def __init__(self) -> None:
+            super().__init__()
+            self.weight = torch.nn.Parameter(torch.zeros(1))
+
+        def training_step(self, batch, batch_idx):
+            return None if batch_idx == 0 else (self.weight - batch.sum()).square().sum()
+
+        def configure_optimizers(self):
+            return torch.optim.SGD(self.parameters(), lr=0.1)
+
+    def warned() -> list[str]:
+        monkeypatch.setattr(automatic.Closure, "warning_cache", WarningCache())  # once per process
+        trainer = L.Trainer(accelerator="cpu", max_epochs=1, logger=False, enable_progress_bar=False,
+                            enable_checkpointing=False, enable_model_summary=False)  # fmt: skip
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with quiet_lightning():
+                trainer.fit(Skips(), torch.utils.data.DataLoader(torch.ones(2, 1), batch_size=1))
+        return [str(w.message) for w in caught]
+
+    with keep_lightning():  # lit-boot --verbose: it shows, so the check below is not vacuous
+        assert any("returned `None`" in m for m in warned())
+    assert not any("returned `None`" in m for m in warned())
