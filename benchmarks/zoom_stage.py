@@ -40,6 +40,7 @@ from lit_boot.synth.config import ACCURATE_DETECTOR
 from real_data import HELDOUT_ROOT, SHARED, SINTEL, window_with_boxes
 
 
+@torch.no_grad()
 def raft_flows(model, scene: Scene, pairs: list[int]) -> torch.Tensor:
     return torch.stack([predict_flow(model, scene.frames[t : t + 1], scene.frames[t + 1 : t + 2])[0].float()
                         for t in pairs])  # fmt: skip

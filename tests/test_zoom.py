@@ -258,8 +258,9 @@ def test_the_zoom_makes_rafts_flow_on_the_person_better(shared):
     leaves the background no worse."""
     scene = lit_boot.make_scene(motion="run", frames=3, height=128, width=256, seed=0)
     model = lit_boot.flow.load_raft("raft_small", str(shared / "checkpoints/raft-small.pth"))
-    base = torch.stack([lit_boot.flow.predict_flow(model, scene.frames[t : t + 1], scene.frames[t + 1 : t + 2])[0]
-                        for t in range(2)])  # fmt: skip
+    with torch.no_grad():
+        base = torch.stack([lit_boot.flow.predict_flow(model, scene.frames[t : t + 1], scene.frames[t + 1 : t + 2])[0]
+                            for t in range(2)])  # fmt: skip
     flows, kept, _ = zoom_flows(model, scene, base, person_boxes(scene, "2d"), ZoomConfig())
     gt = scene.gt
     valid = gt.flow_mask()

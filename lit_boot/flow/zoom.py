@@ -90,7 +90,7 @@ def box_motion(base: Tensor, box: Tensor) -> Tensor:
     """The person's typical motion: the per-axis median of ``base`` (2, H, W) px on the box (4,)
     x0, y0, x1, y1 px, (2,) px (dx, dy); zeros for an empty box."""
     ys, xs = _box_slices(box, tuple(base.shape[-2:]))
-    values = base[:, ys, xs].reshape(2, -1).float()
+    values = base[:, ys, xs].detach().reshape(2, -1).float()
     return values.median(dim=1).values if values.shape[1] else torch.zeros(2)
 
 
@@ -101,7 +101,7 @@ def zoom_scale(base: Tensor, box: Tensor, *, max_scale: float, min_scale: float,
     ``relative_to`` (2,) px where given: the motion left once frame2's crop follows the person).
     s = min(max_scale, reach_px / motion); 1.0 (no zoom) when that is below ``min_scale``."""
     ys, xs = _box_slices(box, tuple(base.shape[-2:]))
-    flow = base[:, ys, xs].float()
+    flow = base[:, ys, xs].detach().float()  # a statistic: no graph (the flow may come from a tuned RAFT)
     if relative_to is not None:
         flow = flow - relative_to.float()[:, None, None]
     magnitude = flow.norm(dim=0).flatten()
