@@ -52,6 +52,10 @@ def cases(scene: Path, clip: Path) -> list[tuple[list[str], str]]:
     return [
         (["bootstrap", "--data.scene", str(scene), "--flow-epochs", "0"], "--flow_epochs: expected >= 1"),
         (["bootstrap", "--data.scene", str(scene), "--self_check.tile", "0"], "--self_check.tile: expected >= 1"),
+        (["bootstrap", "--data.scene", str(scene), "--self_check.max_change_px", "huge"],
+         "--self_check.max_change_px: expected float or 'auto', got 'huge'"),
+        (["bootstrap", "--data.scene", str(scene), "--self_check.max_change_px", "-1"],
+         "--self_check.max_change_px: expected 'auto', None or > 0 px, got -1.0"),
         (["bootstrap", "--data.scene", str(clip)], f"not a scene folder; for a video use --data.video {clip}"),
         (["bootstrap", "--data.scene", str(scene / "nope")], "--data.scene"),
         (["bootstrap", "--data.video", str(clip), "--data.max_frames", "0"], "--data.max_frames: expected an integer"),

@@ -12,11 +12,11 @@ import torch
 
 import lit_boot
 from lit_boot.bootstrap import Bootstrap, BootstrapConfig, bootstrap
-from lit_boot.bootstrap.config import SelfCheckConfig
+from lit_boot.bootstrap.config import WHOLE_FRAME_MAX_CHANGE_PX, SelfCheckConfig
 from lit_boot.bootstrap import runner as runner_module
 from lit_boot.bootstrap.decisions import DECISION_COLOURS, decision_image, load_decisions
-from lit_boot.bootstrap.selfcheck import (blend_weights, changed_box, choose_pixels, choose_regions, region_labels,
-                                         region_names, self_check)
+from lit_boot.bootstrap.selfcheck import (blend_weights, changed_box, check_stage, choose_pixels, choose_regions,
+                                         region_labels, region_names, self_check)
 from lit_boot.flow import person_region
 from lit_boot.flow.evidence import photometric_error
 
@@ -87,10 +87,30 @@ def test_a_change_beyond_max_change_keeps_the_initial_flow_whatever_the_frames_s
     assert (weight[:, :, :48] == 0).all()  # refused: a change of 10 px
     assert weight[:, :, 56:].mean() > 0.5  # a refinement of 2 px, confirmed by the frames
     assert record["max_change_px"] == 8.0
-    _, _, free = self_check(scene.frames, initial, tuned, person, config=SelfCheckConfig(tile=TILE))
+    _, _, free = self_check(scene.frames, initial, tuned, person, config=SelfCheckConfig(tile=TILE, max_change_px=None))
     assert free[:, :, :40].mean() > 0.5  # without the gate the frames decide alone
     with pytest.raises(ValueError, match="self_check.max_change_px"):
         SelfCheckConfig(max_change_px=0.0)
+
+
+def test_auto_limits_the_change_only_where_the_whole_frame_is_tuned(scene):
+    """``max_change_px`` "auto" (the default): the authors' whole-frame fine-tune gets the zoom's
+    16 px refinement limit (a held-out Sintel window, fog and fast motion: the frames preferred
+    changes of about 30 px that were wrong), the crop fine-tune none."""
+    gt = scene.gt.flow.float()
+    person = scene.gt.person_mask[:-1]
+    initial = gt.clone()
+    initial[:, 0, :, :48] += 20.0  # 20 px off on the left half: the exact flow is a change of 20 px there
+    crop = BootstrapConfig(self_check={"method": "photometric", "tile": TILE})
+    whole = BootstrapConfig(self_check={"method": "photometric", "tile": TILE}, flow={"crop_margin": None})
+    assert crop.self_check.max_change_px == "auto" and whole.self_check.max_change_px == "auto"
+    assert (crop.change_limit, whole.change_limit) == (None, WHOLE_FRAME_MAX_CHANGE_PX) == (None, 16.0)
+    _, record, weight = check_stage(crop, scene, initial, gt, person)
+    assert record["max_change_px"] is None and weight[:, :, :40].mean() > 0.5  # the frames decide
+    _, record, weight = check_stage(whole, scene, initial, gt, person)
+    assert record["max_change_px"] == 16.0 and (weight[:, :, :48] == 0).all()  # refused: not a refinement
+    explicit = BootstrapConfig(self_check={"max_change_px": None}, flow={"crop_margin": None})
+    assert explicit.change_limit is None and BootstrapConfig(self_check={"max_change_px": 8}).change_limit == 8
 
 
 def test_ties_keep_the_initial_flow(scene):

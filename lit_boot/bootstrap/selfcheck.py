@@ -35,6 +35,7 @@ flows.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import kornia
@@ -44,7 +45,8 @@ from torch import Tensor
 from ..core import Scene
 from ..flow.evidence import photometric_error
 from ..flow.zoom import refines
-from .config import SELF_CHECKS, BootstrapConfig, SelfCheckConfig
+from .config import BootstrapConfig
+from .stage_configs import SELF_CHECKS, SelfCheckConfig
 
 __all__ = ["SELF_CHECKS", "SelfCheckConfig", "region_labels", "region_names", "choose_regions", "choose_pixels",
            "blend_weights", "changed_box",
@@ -177,7 +179,9 @@ def self_check(
     """The checked flows, the record of every decision and the weight map of the tuned flow.
 
     frames: (T, 3, H, W) uint8; initial, tuned: (T-1, 2, H, W) px; person: (T-1, H, W) bool;
-    config: the rule's settings (its ``method`` is not read: this is the photometric check).
+    config: the rule's settings (its ``method`` is not read: this is the photometric check; its
+    ``max_change_px`` "auto", which a run resolves from its flow mode
+    (:attr:`~lit_boot.bootstrap.BootstrapConfig.change_limit`), is no limit here).
     Returns (flows (T-1, 2, H, W) px: the initial flow blended with the tuned flow where it won,
     record, weight (T-1, H, W) float in [0, 1]: the tuned flow's share per pixel). The record:
     ``kept_tuned_fraction`` (mean weight of the tuned flow over all pixels),
@@ -190,6 +194,7 @@ def self_check(
     elsewhere they are the same flow.
     """
     margin, tile, window, z, blend, own = config.margin, config.tile, config.window, config.z, config.blend, config.own
+    limit = None if config.max_change_px == "auto" else config.max_change_px
     height, width = initial.shape[-2:]
     labels = region_labels(person, tile)
     names = region_names(height, width, tile)
@@ -211,8 +216,8 @@ def self_check(
         won, mean_i, mean_t, pixels = choose_regions(err_i, err_t, valid & ~on, there, count, margin=margin, z=z)
         on_person = choose_pixels(err_i, err_t, valid, on, window=window, margin=margin, own=own)
         choice[y0:y1, x0:x1] = torch.where(on, on_person, won[there])
-        if config.max_change_px is not None:  # only a refinement is judged by the frames
-            gate = refines(initial[t, :, y0:y1, x0:x1], tuned[t, :, y0:y1, x0:x1], config.max_change_px)
+        if limit is not None:  # only a refinement is judged by the frames
+            gate = refines(initial[t, :, y0:y1, x0:x1], tuned[t, :, y0:y1, x0:x1], limit)
             choice[y0:y1, x0:x1] &= gate
             on_person &= gate
         choices.append(choice)
@@ -234,7 +239,7 @@ def self_check(
     regions = sum(len(p["regions"]) for p in per_pair)
     tuned_regions = sum(len(p["tuned"]) for p in per_pair)
     record = {"method": "photometric", "margin": margin, "tile": tile, "blend": blend, "window": window, "z": z, "own": own,
-              "max_change_px": config.max_change_px,
+              "max_change_px": limit,
               "kept_tuned_fraction": float(weight.mean()), "regions_tuned": tuned_regions,
               "regions_initial": regions - tuned_regions,
               "person_tuned_fraction": float(weight[person].mean()) if person.any() else 0.0,
@@ -254,7 +259,8 @@ def check_stage(
         return tuned, None, None
     from ..metrics import scene_flow_metrics
 
-    flows, record, weight = self_check(scene.frames, initial, tuned, person, config=config.self_check)
+    checking = replace(config.self_check, max_change_px=config.change_limit)
+    flows, record, weight = self_check(scene.frames, initial, tuned, person, config=checking)
     return flows, {**record, "tuned_metrics": scene_flow_metrics(scene.gt, tuned, scene.track_id)}, weight
 
 

@@ -33,7 +33,7 @@ from ..core import Scene
 from ..flow.evidence import photometric_error
 from ..metrics import scene_flow_metrics
 from ..flow.zoom import boxes_from_points, pair_boxes, refines, zoom_pair
-from .config import ZoomConfig
+from .stage_configs import ZoomConfig
 from .evaluate import agreement, drift, photo_error
 from .selfcheck import CENSUS_RADIUS, choose_pixels
 

@@ -207,6 +207,7 @@ def command_output(verbose: bool = False) -> Iterator[None]:
 
 _PARSER_KEY = re.compile(r'Parser key "([^"]+)":\s*')
 _EXPECTED = re.compile(r"Expected a <class '(\w+)'>")
+_LITERAL = re.compile(r"Expected a typing\.Literal\[(.+)\]")
 _UNION = "Does not validate against any of the Union subtypes"
 
 
@@ -235,8 +236,8 @@ def _union_reasons(text: str) -> str:
     indent = match.group(1) if (match := re.search(r"^([ \t]*)- ", errors, re.M)) else ""
     items = [" ".join(item.split()) for item in re.split(rf"^{indent}- ", errors, flags=re.M) if item.strip()]
     items = [item for item in items if item != "Expected a <class 'NoneType'>"]
-    expected = [match.group(1) for item in items if (match := _EXPECTED.fullmatch(item))]
-    real = [_class_problem(item, key) for item in items if not _EXPECTED.fullmatch(item)]
+    expected = [match.group(1) for item in items if (match := _EXPECTED.fullmatch(item) or _LITERAL.fullmatch(item))]
+    real = [_class_problem(item, key) for item in items if not (_EXPECTED.fullmatch(item) or _LITERAL.fullmatch(item))]
     if real:  # a class's problem names its options in full (--data.scene): the head (--data) adds nothing
         named = key is not None and any(item.startswith("Problem with given class_path") for item in items)
         return ("" if named else head) + "; ".join(real)
