@@ -41,7 +41,7 @@ from lit_boot.metrics import flow_errors
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 #: Held-out Sintel windows (not in ../shared; BENCHMARKS.md, "Held-out Sintel windows", says where
-#: they come from): the official layout under --heldout-root.
+#: they come from): the official layout under --heldout-root, as benchmarks/heldout_sintel.py writes it.
 HELDOUT_ROOT = Path(__file__).resolve().parents[1].parent / "heldout/sintel"
 SINTEL = [("alley_1", 1, 4), ("market_5", 1, 4), ("market_5b", 8, 11), ("temple_3", 21, 24), ("bandage_1", 34, 37),
           ("ambush_4", 3, 8)]  # fmt: skip
@@ -121,7 +121,8 @@ def main() -> None:
     p.add_argument("--gate", action="store_true", help="targets with the evidence gate (GATE)")
     p.add_argument("--scenes", default=",".join(name for name, _, _ in SINTEL),
                    help="Sintel windows to run: of SINTEL (../shared) and HELDOUT (--heldout-root)")
-    p.add_argument("--heldout-root", default=str(HELDOUT_ROOT), help="the held-out windows' Sintel root")
+    p.add_argument("--heldout-root", default=str(HELDOUT_ROOT),
+                   help="the held-out windows' Sintel root (benchmarks/heldout_sintel.py writes it)")
     p.add_argument("--detector", default=str(SHARED / "checkpoints/yolox_nano.onnx"),
                    help="YOLOX person detector for the person's boxes ('none': MediaPipe's keypoints only)")
     p.add_argument("--flow", default="{}", help='FlowTTT options over the preset\'s, JSON: {"sketch": {"max_disagreement_px": 3}}')
