@@ -28,8 +28,8 @@ MEMORY_CHECK_ENV = "LIT_BOOT_MEMORY_CHECK"
 _MODEL_BASE = 256 * 2**20
 _RAFT_MIN_SIDE = 128
 _RESIZE_HEIGHTS = (1080, 720, 540, 480, 360, 288, 240, 180, 128)
-#: The zoom stage's default limit on a zoomed crop's pixels (lit_boot.bootstrap.config.ZoomConfig's
-#: max_pixels, spelled there too: the config module imports nothing of the library's data layer).
+#: The zoom stage's default limit on a zoomed crop's pixels (lit_boot.bootstrap.stage_configs.ZoomConfig's
+#: max_pixels, spelled there too: the settings modules import nothing of the library's data layer).
 ZOOM_PIXELS = 2**21
 
 
@@ -65,14 +65,19 @@ class MemoryEstimate:
         return self.frames + self.flows + self.model
 
 
+def _pyramid_bytes(cells: int) -> int:
+    """RAFT's all-pairs correlation pyramid for ``cells`` grid cells (1/8 of the pixels): cells^2
+    float32 at the finest level, 4/3 of it over the levels."""
+    return cells * cells * 4 * 4 // 3
+
+
 def estimate_memory(num_frames: int, height: int, width: int) -> MemoryEstimate:
     """The estimate (module docstring) for ``num_frames`` frames of ``width`` x ``height`` px."""
     T, H, W = int(num_frames), int(height), int(width)
     cells = math.ceil(max(H, _RAFT_MIN_SIDE) / 8) * math.ceil(max(W, _RAFT_MIN_SIDE) / 8)
     zoom_cells = min(4 * H * W, ZOOM_PIXELS) // 64
-    pyramid = lambda n: n * n * 4 * 4 // 3  # noqa: E731
     flows = 2 * max(T - 1, 0) * 2 * H * W * 4
-    model = max(3 * pyramid(cells), pyramid(zoom_cells) * 8 // 5) + _MODEL_BASE
+    model = max(3 * _pyramid_bytes(cells), _pyramid_bytes(zoom_cells) * 8 // 5) + _MODEL_BASE
     return MemoryEstimate(frames=T * H * W * 3, flows=flows, model=model)
 
 
