@@ -13,6 +13,9 @@ RAFT's and the zoom's seconds against RAFT's.
   non-occluded pixels, all / person / background, mean over scenes. ``--set small`` and
   ``small_validation``: SMALL and SMALL_VALIDATION, small people at 256x512, 4 frames.
 
+A variant's ``max_cost`` "auto" (the default) is the mode's (ZoomConfig.for_mode): 2D's for the
+Sintel windows (as real_data.py runs them), ``--mode``'s for the synthetic scenes.
+
 Usage:
   python benchmarks/zoom_stage.py --source sintel|synthetic [--windows alley_1,...] [--size 218,512|full]
       [--set tuning|validation|small|small_validation] [--mode 3d|2d]
@@ -100,7 +103,8 @@ def main() -> None:
     print(f"settings: {vars(args)}", flush=True)
     torch.manual_seed(0)
     model = load_raft("raft_small", args.weights).eval()
-    variants = {name: ZoomConfig(**fields) for name, fields in json.loads(args.variants).items()}
+    mode = "2d" if args.source == "sintel" else args.mode  # the Sintel runs are 2D (real_data.py)
+    variants = {name: ZoomConfig(**fields).for_mode(mode) for name, fields in json.loads(args.variants).items()}
     rows, seconds = [], {"raft": 0.0, **dict.fromkeys(variants, 0.0)}
     cases = sintel_cases(args, model) if args.source == "sintel" else synthetic_cases(args, model)
     for name, scene, pairs, boxes, masks in cases:

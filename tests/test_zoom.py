@@ -3,6 +3,8 @@ keeps it unless the frames refuse it (lit_boot.bootstrap.zoom)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import torch
 
@@ -183,7 +185,7 @@ def test_zoom_flows_records_every_pair(monkeypatch):
     truth[0] = 3.0
     monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates, *rest: truth[
         :, crop[0] : crop[1], crop[2] : crop[3]])  # fmt: skip
-    flows, kept, record = zoom_flows(None, scene, base, boxes, ZoomConfig())
+    flows, kept, record = zoom_flows(None, scene, base, boxes, ZoomConfig().for_mode("3d"))
     assert record["zoomed_pairs"] == 2 and len(record["per_pair"]) == 2
     assert kept[0].any() and kept[1].any() and record["kept_fraction"] == pytest.approx(float(kept.float().mean()))
     assert torch.equal(flows[kept[:, None].expand_as(flows)], truth.expand_as(flows)[kept[:, None].expand_as(flows)])
@@ -206,8 +208,9 @@ def test_every_person_is_zoomed_in_turn(monkeypatch):
     monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates, *rest: truth[
         :, crop[0] : crop[1], crop[2] : crop[3]])  # fmt: skip
     base = torch.zeros(2, 2, 96, 128)
-    flows, kept, record, person = _zoom_people(None, scene, base, "2d", ZoomConfig())
-    main_only = zoom_flows(None, scene.person(0), base, a, ZoomConfig())[1]
+    config = ZoomConfig().for_mode("2d")
+    flows, kept, record, person = _zoom_people(None, scene, base, "2d", config)
+    main_only = zoom_flows(None, scene.person(0), base, a, config)[1]
     assert kept[:, 30:61, 80:121].any() and not main_only[:, :, 75:].any()  # the second person's box zoomed too
     assert person[:, 30:61, 10:51].all() and person[:, 20:71, 80:121].all()
     assert [p["track_id"] for p in record["people"]] == [0, 4] and record["zoomed_pairs"] == 4
@@ -261,7 +264,7 @@ def test_the_zoom_makes_rafts_flow_on_the_person_better(shared):
     with torch.no_grad():
         base = torch.stack([lit_boot.flow.predict_flow(model, scene.frames[t : t + 1], scene.frames[t + 1 : t + 2])[0]
                             for t in range(2)])  # fmt: skip
-    flows, kept, _ = zoom_flows(model, scene, base, person_boxes(scene, "2d"), ZoomConfig())
+    flows, kept, _ = zoom_flows(model, scene, base, person_boxes(scene, "2d"), ZoomConfig().for_mode("3d"))
     gt = scene.gt
     valid = gt.flow_mask()
     person, background = valid & gt.person_mask[:-1], valid & ~gt.person_mask[:-1]
@@ -377,3 +380,38 @@ def test_the_zoomed_crop_keeps_within_max_pixels(monkeypatch):
     assert ZoomConfig().max_pixels == ZOOM_PIXELS  # the memory check assumes the default
     with pytest.raises(ValueError, match="zoom.max_pixels"):
         ZoomConfig(max_pixels=0)
+
+
+def test_the_zooms_cost_is_the_modes_unless_given(monkeypatch):
+    """``max_cost`` "auto" (the default): two frames of pixels in 3D mode, four in 2D mode (each
+    mode's speed bar); a small person's crop is then zoomed more in 2D; a number holds in both."""
+    from lit_boot.bootstrap.stage_configs import ZOOM_COST
+    from lit_boot.bootstrap.zoom import zoom_stage
+
+    assert ZoomConfig().max_cost == "auto" and ZOOM_COST == {"3d": 2.0, "2d": 4.0}
+    assert ZoomConfig().for_mode("3d").max_cost == 2.0 and ZoomConfig().for_mode("2d").max_cost == 4.0
+    assert ZoomConfig(max_cost=3.0).for_mode("2d").max_cost == 3.0
+    with pytest.raises(ValueError, match="mode: expected one of"):
+        ZoomConfig().for_mode("4d")
+    for bad in (0.0, -1.0, "lots"):
+        with pytest.raises(ValueError, match="zoom.max_cost: expected 'auto' or > 0 frames"):
+            ZoomConfig(max_cost=bad)
+    box = torch.tensor([[56.0, 40, 72, 56, 1]] * 3)  # a 17 px person in a 96x128 frame: capped by the cost
+    scene = dataclasses.replace(lit_boot.make_scene(motion="run", frames=3, height=96, width=128, seed=0),
+                                person_boxes=box)  # both modes' poses; the detector's box  # fmt: skip
+    monkeypatch.setattr(flow_zoom, "zoomed_flow", lambda model, a, b, crop, scale, updates, *rest: torch.zeros(
+        2, crop[1] - crop[0], crop[3] - crop[2]))  # fmt: skip
+    base = torch.zeros(2, 2, 96, 128)
+    with pytest.raises(ValueError, match="zoom.max_cost 'auto' depends on the mode"):
+        zoom_flows(None, scene, base, box, ZoomConfig())
+    raft = torch.nn.Linear(1, 1)  # moved to the device and back; the zoomed flow is monkeypatched
+    zooms = {mode: zoom_stage(raft, scene, base, mode=mode, config=ZoomConfig(small_scale=8.0), device="cpu")[0]
+             for mode in ("3d", "2d")}  # fmt: skip
+    info = {mode: record["info"]["zoom"] for mode, record in zooms.items()}
+    assert info["3d"]["max_cost"] == 2.0 and info["2d"]["max_cost"] == 4.0
+    scale = {mode: info[mode]["per_pair"][0]["scale"] for mode in info}
+    assert scale["2d"] == pytest.approx(scale["3d"] * 2**0.5, rel=1e-3)  # twice the pixels (records: 4 digits)
+    assert info["2d"]["cost"] == pytest.approx(2 * info["3d"]["cost"], rel=1e-3)
+    fixed = zoom_stage(raft, scene, base, mode="2d", config=ZoomConfig(small_scale=8.0, max_cost=2.0), device="cpu")
+    assert fixed[0]["info"]["zoom"]["per_pair"][0]["scale"] == pytest.approx(scale["3d"])
+

@@ -5,11 +5,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 __all__ = ["SELF_CHECKS", "ZOOMS", "ZOOM_TEACHING", "ZOOM_STARTS", "ZOOM_CONFIRM", "WHOLE_FRAME_MAX_CHANGE_PX",
-           "SelfCheckConfig", "ZoomConfig"]
+           "ZOOM_COST", "SelfCheckConfig", "ZoomConfig"]
 
 #: The flow stages' self-check against the frames (see :mod:`lit_boot.bootstrap.selfcheck`).
 SELF_CHECKS = ("off", "photometric")
@@ -27,6 +27,12 @@ ZOOM_CONFIRM = ("census", "veto", "none")
 #: The self-check's refinement limit (px) where the flow stages tune the whole frame
 #: (``self_check.max_change_px`` "auto"): the zoom stage's (``ZoomConfig.max_change_px``).
 WHOLE_FRAME_MAX_CHANGE_PX = 16.0
+
+#: The zoom's cost per mode (``zoom.max_cost`` "auto"), in frames of pixels: each mode's speed
+#: bar (3D 5x, 2D 10x plain RAFT) decides how much of it the zoom may spend. Four frames gain more
+#: on every set measured, but take a 3D run to the 5x bar; a 2D run (50 epochs) stays near 7x
+#: (BENCHMARKS.md, "The zoom's cost, four frames" and "The zoom's cost per mode").
+ZOOM_COST = {"3d": 2.0, "2d": 4.0}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -94,7 +100,8 @@ class ZoomConfig:
             the zoomed crop stays within ``max_cost`` frames of pixels; None: ``max_scale`` for
             everyone. A large person's crop is zoomed ``max_scale`` as before (BENCHMARKS.md,
             "Small people zoomed more, the default").
-        max_cost: see ``small_scale``: the zoomed crop's pixels, in frames (2).
+        max_cost: see ``small_scale``: the zoomed crop's pixels, in frames; "auto": the mode's
+            (:data:`ZOOM_COST`: 2 in 3D, 4 in 2D), resolved by :meth:`for_mode`.
         max_pixels: the zoomed crop's pixels at most, whatever the scale (2**21, e.g. 1448 x
             1448): RAFT's all-pairs correlation memory grows with their square (8.2 GiB measured
             at this many); a pair whose scale would fall below ``min_scale`` is not zoomed.
@@ -134,7 +141,7 @@ class ZoomConfig:
     method: str | None = None
     max_scale: float = 2.0
     small_scale: float | None = 4.0
-    max_cost: float = 2.0
+    max_cost: float | Literal["auto"] = "auto"
     max_pixels: int | None = 2**21
     min_scale: float = 1.5
     reach_px: float = 60.0
@@ -167,7 +174,10 @@ class ZoomConfig:
                              f"got {self.small_scale}")  # fmt: skip
         if self.max_pixels is not None and not self.max_pixels > 0:
             raise ValueError(f"zoom.max_pixels: expected None or > 0, got {self.max_pixels}")
-        for name in ("reach_px", "max_change_px", "context", "max_cost"):
+        cost = self.max_cost
+        if cost != "auto" and (isinstance(cost, str) or not cost > 0):
+            raise ValueError(f"zoom.max_cost: expected 'auto' or > 0 frames, got {cost!r}")
+        for name in ("reach_px", "max_change_px", "context"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"zoom.{name}: expected > 0, got {getattr(self, name)}")
         for name, least in (("min_context_px", 0), ("border_px", 0), ("updates", 1), ("window", 1),
@@ -176,3 +186,9 @@ class ZoomConfig:
                 raise ValueError(f"zoom.{name}: expected >= {least}, got {getattr(self, name)}")
         if not 0 <= self.margin < 1:
             raise ValueError(f"zoom.margin: expected 0 <= margin < 1, got {self.margin}")
+
+    def for_mode(self, mode: str) -> ZoomConfig:
+        """This config with ``max_cost`` "auto" resolved for ``mode`` (3d or 2d; :data:`ZOOM_COST`)."""
+        if mode not in ZOOM_COST:
+            raise ValueError(f"mode: expected one of {tuple(ZOOM_COST)}, got {mode!r}")
+        return self if self.max_cost != "auto" else replace(self, max_cost=ZOOM_COST[mode])

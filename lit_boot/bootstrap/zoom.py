@@ -96,7 +96,10 @@ def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: Z
     it was kept, kept (T-1, H, W) bool, record). The record: ``kept_fraction`` (of all pixels),
     ``zoomed_pairs``, ``cost`` (zoomed pixels over the frames', summed over pairs: the zoom's
     cost in RAFT passes), ``seconds`` and ``per_pair`` (scale, motion px, crop, region, cost,
-    kept fraction of the region)."""
+    kept fraction of the region), ``max_cost`` (frames). ``config.max_cost`` must be a number:
+    "auto" depends on the run's mode (:meth:`ZoomConfig.for_mode`)."""
+    if config.max_cost == "auto":
+        raise ValueError("zoom.max_cost 'auto' depends on the mode: pass config.for_mode('3d' or '2d')")
     start = time.perf_counter()
     frames, flows = scene.frames, base.clone()
     kept = torch.zeros(base.shape[0], *base.shape[-2:], dtype=torch.bool)
@@ -118,7 +121,7 @@ def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: Z
     record = {"kept_fraction": float(kept.float().mean()),
               "zoomed_pairs": sum(p["region"] is not None for p in per_pair),
               "cost": round(sum(p["cost"] for p in per_pair), 4), "seconds": time.perf_counter() - start,
-              "per_pair": per_pair}  # fmt: skip
+              "max_cost": config.max_cost, "per_pair": per_pair}  # fmt: skip
     return flows, kept, record
 
 
@@ -128,7 +131,9 @@ def zoom_stage(raft: RAFT, scene: Scene, initial: Tensor, *, mode: str, config: 
     back) over ``initial`` (T-1, 2, H, W) px, the person's boxes from the scene or the pose of
     ``mode``. Returns (the stage's record: the flow's metrics (GT when the scene has it, and the
     evidence), drift outside the person's boxes, ``info["zoom"]``; the flows (T-1, 2, H, W) px;
-    the decision maps: nothing painted, ``kept`` the zoomed flow's pixels)."""
+    the decision maps: nothing painted, ``kept`` the zoomed flow's pixels). ``config.max_cost``
+    "auto" is the mode's (:meth:`ZoomConfig.for_mode`)."""
+    config = config.for_mode(mode)
     original = next(raft.parameters()).device
     raft.to(device)
     try:
@@ -161,6 +166,7 @@ def _zoom_people(raft: RAFT, scene: Scene, initial: Tensor, mode: str,
         return flows, kept, records[0][1], person
     zoom = {"kept_fraction": float(kept.float().mean()), "zoomed_pairs": sum(r["zoomed_pairs"] for _, r in records),
             "cost": round(sum(r["cost"] for _, r in records), 4), "seconds": sum(r["seconds"] for _, r in records),
+            "max_cost": config.max_cost,
             "per_pair": [pair for _, r in records for pair in r["per_pair"]],
             "people": [{"track_id": i, "zoomed_pairs": r["zoomed_pairs"], "kept_fraction": r["kept_fraction"]}
                        for i, r in records]}  # fmt: skip
