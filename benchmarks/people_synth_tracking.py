@@ -11,7 +11,7 @@ the other people walk across, crossing and occluding person 0.
 
 Usage: python benchmarks/people_synth_tracking.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--jitter 0.05] [--miss 0.1] [--smoothing 0.5] [--keypoints]
-           [--pose-miss 0.3] [--keypoint-weight 1] [--no-stitch] [--json out.json] [--grid]
+           [--pose-miss 0.3] [--keypoint-weight 1] [--no-stitch] [--beam 1] [--json out.json] [--grid]
 
 ``--grid`` prints one line instead of the table: the identity switches summed over the people of
 the scenes, "noisy" (5% jitter, 10% missed), "exact" (none) and "harder" (10%/20%, 5%/20% and
@@ -91,7 +91,7 @@ def switches(args: argparse.Namespace, jitter: float, miss: float, pose_miss: fl
             g = torch.Generator().manual_seed(seed)
             dets, who, kps = detections_of(scene, jitter, miss, g)
             kps = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= pose_miss) for k in kps]
-            options = {"smoothing": args.smoothing, "keypoint_weight": args.keypoint_weight}
+            options = {"smoothing": args.smoothing, "keypoint_weight": args.keypoint_weight, "beam": args.beam}
             tracks = track_people(dets, keypoints=kps if args.keypoints else None, stitch=not args.no_stitch,
                                   **{k: v for k, v in options.items() if v is not None})  # fmt: skip
             visible = torch.stack([p.person_boxes[:, 4] > 0 for p in scene.people()])
@@ -122,6 +122,7 @@ def main() -> None:
                         help="with --keypoints: the share of detections whose pose is not found (confidence 0)")
     parser.add_argument("--keypoint-weight", type=float, default=None, help="track_people's keypoint_weight")
     parser.add_argument("--no-stitch", action="store_true", help="track_people(stitch=False)")
+    parser.add_argument("--beam", type=int, default=None, help="track_people's beam (1: frame by frame)")
     parser.add_argument("--json", default=None)
     parser.add_argument("--grid", action="store_true", help="the switches over the grid of conditions, one line")
     args = parser.parse_args()

@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-import lit_boot.estimate.people_track as people_track
+import lit_boot.estimate.track_cost as track_cost
 from lit_boot.estimate.people_track import parse_people, select_people, track_people
 
 
@@ -156,11 +156,13 @@ def followed(tracks: torch.Tensor, dets: list[torch.Tensor], owners: list[list[i
 
 
 def test_a_synthetic_crossing_keeps_both_ids():
-    """Each track follows one person, and each person is one track (with smoothing 0.5 and no
-    stitching the hidden one split in three; the stitch joins its pieces again)."""
+    """Each track follows one person, and each person is one track (linking frame by frame with
+    smoothing 0.5 and no stitching, the hidden one split in three; the stitch joins its pieces
+    again)."""
     dets, _, owners = synthetic_crossing(30)
+    assert sorted(followed(track_people(dets), dets, owners), key=min) == [{0}, {1}]
     for smoothing, stitch, whole in ((0.1, True, True), (0.1, False, True), (0.5, False, False), (0.5, True, True)):
-        who = followed(track_people(dets, smoothing=smoothing, stitch=stitch), dets, owners)
+        who = followed(track_people(dets, smoothing=smoothing, stitch=stitch, beam=1), dets, owners)
         assert all(len(w) == 1 for w in who)
         assert (len(who) == 2 and sorted(min(w) for w in who) == [0, 1]) == whole
 
@@ -177,6 +179,10 @@ def test_keypoints_keep_the_ids_where_the_boxes_alone_switch():
     assert sorted(with_pose, key=min) == [{0}, {1}]
 
 
+# Where a test below takes one term out of the cost to show what it does, it links frame by frame
+# (beam=1): the beam search could make up for the missing term by hindsight.
+
+
 def test_the_joints_give_the_velocity_where_an_occluder_moves_the_box(monkeypatch):
     """Seed 39, noisy boxes (10% jitter, 10% missed): where the far person is hidden, its box
     shrinks to the visible part and the box's centre moves although the person does not; the
@@ -185,10 +191,11 @@ def test_the_joints_give_the_velocity_where_an_occluder_moves_the_box(monkeypatc
     keeps them apart here, left out)."""
     dets, keypoints, owners = synthetic_crossing(39, jitter=0.1, miss=0.1)
     assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}]
-    monkeypatch.setattr(people_track, "KEYPOINT_SHAPE_WEIGHT", 0.0)
-    assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}]
-    monkeypatch.setattr(people_track, "JOINT_VELOCITY", False)
-    by_box = followed(track_people(dets, keypoints=keypoints), dets, owners)
+    assert sorted(followed(track_people(dets, keypoints=keypoints, beam=1), dets, owners), key=min) == [{0}, {1}]
+    monkeypatch.setattr(track_cost, "KEYPOINT_SHAPE_WEIGHT", 0.0)
+    assert sorted(followed(track_people(dets, keypoints=keypoints, beam=1), dets, owners), key=min) == [{0}, {1}]
+    monkeypatch.setattr(track_cost, "JOINT_VELOCITY", False)
+    by_box = followed(track_people(dets, keypoints=keypoints, beam=1), dets, owners)
     assert any(len(w) > 1 for w in by_box)
 
 
@@ -201,8 +208,9 @@ def test_the_keypoint_distance_is_per_frame_since_the_pose_was_seen(monkeypatch)
     g = torch.Generator().manual_seed(1)
     keypoints = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= 0.5) for k in keypoints]
     assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}]
-    monkeypatch.setattr(people_track, "KEYPOINT_PER_FRAME", False)
-    assert len(followed(track_people(dets, keypoints=keypoints, stitch=False), dets, owners)) == 3
+    assert sorted(followed(track_people(dets, keypoints=keypoints, beam=1), dets, owners), key=min) == [{0}, {1}]
+    monkeypatch.setattr(track_cost, "KEYPOINT_PER_FRAME", False)
+    assert len(followed(track_people(dets, keypoints=keypoints, stitch=False, beam=1), dets, owners)) == 3
 
 
 def test_a_track_seen_a_frame_ago_goes_before_one_unseen_for_longer(monkeypatch):
@@ -214,8 +222,9 @@ def test_a_track_seen_a_frame_ago_goes_before_one_unseen_for_longer(monkeypatch)
     g = torch.Generator().manual_seed(1)
     keypoints = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= 0.5) for k in keypoints]
     assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}]
-    monkeypatch.setattr(people_track, "KEYPOINT_GAP_COST", 0.0)
-    assert any(len(w) > 1 for w in followed(track_people(dets, keypoints=keypoints), dets, owners))
+    assert sorted(followed(track_people(dets, keypoints=keypoints, beam=1), dets, owners), key=min) == [{0}, {1}]
+    monkeypatch.setattr(track_cost, "KEYPOINT_GAP_COST", 0.0)
+    assert any(len(w) > 1 for w in followed(track_people(dets, keypoints=keypoints, beam=1), dets, owners))
 
 
 def test_keypoints_are_checked_against_the_detections():
@@ -250,8 +259,9 @@ def test_the_poses_shape_tells_two_overlapping_people_apart(monkeypatch):
     coincide: every track follows one person. Without it, a track covers two people."""
     dets, keypoints, owners = synthetic_crossing(35, motion="run", people=3)
     assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}, {2}]
-    monkeypatch.setattr(people_track, "KEYPOINT_SHAPE_WEIGHT", 0.0)
-    assert any(len(w) > 1 for w in followed(track_people(dets, keypoints=keypoints), dets, owners))
+    assert sorted(followed(track_people(dets, keypoints=keypoints, beam=1), dets, owners), key=min) == [{0}, {1}, {2}]
+    monkeypatch.setattr(track_cost, "KEYPOINT_SHAPE_WEIGHT", 0.0)
+    assert any(len(w) > 1 for w in followed(track_people(dets, keypoints=keypoints, beam=1), dets, owners))
 
 
 def test_the_shape_term_ranks_tracks_and_leaves_unmeasured_pairs_alone():
@@ -261,8 +271,53 @@ def test_the_shape_term_ranks_tracks_and_leaves_unmeasured_pairs_alone():
     moved = pose + torch.tensor([7.0, -3.0, 0.0])
     other = pose.clone()
     other[:, :2] = pose[:, :2].mean(0) + (pose[:, :2] - pose[:, :2].mean(0)) * 2  # twice as large: another layout
-    tracks = [people_track._Track(keypoints=k, keypoint_frame=0) for k in (pose, other)]
-    where, shape = people_track._keypoint_distance(tracks, 1, torch.stack([moved, moved * torch.tensor([1, 1, 0.0])]),
+    tracks = [track_cost.TrackState(keypoints=k, keypoint_frame=0) for k in (pose, other)]
+    where, shape = track_cost._keypoint_distance(tracks, 1, torch.stack([moved, moved * torch.tensor([1, 1, 0.0])]),
                                                    torch.tensor([40.0, 40.0]))  # fmt: skip
     assert shape[0, 0] == pytest.approx(0.0, abs=1e-6) and shape[1, 0] > 0.1 and where[0, 0] > 0.1
     assert torch.isnan(shape[:, 1]).all() and torch.isnan(where[:, 1]).all()  # no confident joint
+
+
+def test_hindsight_keeps_the_ids_where_the_frame_by_frame_link_switches():
+    """Two synthetic people (seed 32, walk, noisy boxes: 5% jitter, 10% missed; every pose found):
+    frame 0 shows person 0 alone and frame 1 person 1 alone. Frame by frame, person 0's new track
+    takes person 1's detection in frame 1 (nearer than a miss costs), and from there on both
+    tracks cover both people. The beam search leaves that track alone in frame 1 and starts person
+    1's own: dearer there, paid back by the frames after."""
+    dets, keypoints, owners = synthetic_crossing(32, jitter=0.05, miss=0.1)
+    assert owners[0] == [0] and owners[1] == [1]
+    frame_by_frame = followed(track_people(dets, keypoints=keypoints, beam=1), dets, owners)
+    assert any(len(w) > 1 for w in frame_by_frame)
+    assert sorted(followed(track_people(dets, keypoints=keypoints), dets, owners), key=min) == [{0}, {1}]
+
+
+def test_the_best_assignments_are_ranked_as_by_brute_force():
+    """track_search.best_assignments against every assignment of a small problem enumerated: a
+    track takes one detection or none, a detection goes to one track or none, each left alone
+    costing the miss; inf pairs are never taken."""
+    import itertools
+
+    from lit_boot.estimate.track_search import assign, best_assignments
+
+    g = torch.Generator().manual_seed(3)
+    cost = torch.rand(3, 4, generator=g) * 2.5
+    cost[0, 1] = cost[2, 3] = float("inf")
+    every = []
+    for choice in itertools.product([None, 0, 1, 2, 3], repeat=3):
+        taken = [c for c in choice if c is not None]
+        if len(set(taken)) < len(taken) or any(c is not None and not torch.isfinite(cost[r, c]) for r, c in enumerate(choice)):
+            continue
+        pairs = [(r, c) for r, c in enumerate(choice) if c is not None]
+        every.append((sum(float(cost[r, c]) for r, c in pairs) + 1.0 * (3 - len(pairs) + 4 - len(pairs)), pairs))
+    every.sort(key=lambda x: x[0])
+    ranked = best_assignments(cost, 8)
+    assert [round(total, 5) for total, _ in ranked] == [round(total, 5) for total, _ in every[:8]]
+    assert len({tuple(pairs) for _, pairs in ranked}) == 8  # each a different assignment
+    assert sorted(ranked[0][1]) == sorted(every[0][1]) == sorted(assign(cost))
+    assert len(best_assignments(cost, 10_000)) == len(every)
+
+
+def test_beam_is_checked():
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ValueError, match="beam: expected a number of hypotheses"):
+            track_people(frames_of([]), beam=bad)
