@@ -1,7 +1,8 @@
 """The tracker's cost of giving a detection to a track, and a track's running state.
 
 A track (:class:`TrackState`) predicts its next box from its last one moved on by its velocity (px
-per frame, a running mean of its centre's motion, each frame weighing ``smoothing``; its joints'
+per frame, a running mean of its centre's motion, each frame weighing ``smoothing``, or the plain
+mean of the first steps while each weighs more than that; its joints'
 median motion where it shares enough of them with the last frame: an occluder moves a box's
 centre, not the person). :func:`pair_costs` gives each (track, detection) pair a cost in [0, 2]
 plus the pose terms: ``1 - IoU`` with the predicted box when they overlap by at least
@@ -41,6 +42,11 @@ KEYPOINT_CONF = 0.3
 KEYPOINT_MIN_JOINTS = 4
 #: A track's velocity from its joints' median motion where they are shared (else the box centre's).
 JOINT_VELOCITY = True
+#: A track's velocity starts as the plain mean of its first steps (each of the first n weighing
+#: 1 / n) until that weight falls to ``smoothing``; False: its first step as it is, then the running
+#: mean (a new track's first step, often a box that changed shape, then steered it for many
+#: frames; BENCHMARKS.md, "Tracking with hindsight").
+MEAN_START = True
 #: The keypoint distance per frame since the track's keypoints were seen (a pose unseen for a while
 #: predicts loosely; BENCHMARKS.md, "Keypoints in the tracker").
 KEYPOINT_PER_FRAME = True
@@ -101,7 +107,8 @@ class TrackState:
             step = self._joint_step(t, keypoints)
             if step is None:
                 step = (_centre(det[:4]) - _centre(self.box[:4])) / (t - self.last)
-            self.velocity = step if self.seen == 1 else (1 - smoothing) * self.velocity + smoothing * step
+            weight = max(smoothing, 1.0 / self.seen) if MEAN_START else (1.0 if self.seen == 1 else smoothing)
+            self.velocity = (1 - weight) * self.velocity + weight * step
         self.box, self.last, self.seen = det.clone(), t, self.seen + 1
         self.history = (t, self.box, self.history)
         if keypoints is not None and bool((keypoints[:, 2] > 0).any()):
