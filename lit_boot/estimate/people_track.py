@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import torch
 
 from .person_track import check_detections
-from .track_cost import KEYPOINT_WEIGHT, SMOOTHING, TrackState, _centre, _side
+from .track_cost import KEYPOINT_WEIGHT, SMOOTHING, TrackState, box_centre, box_side
 from .track_search import assign, link
 
 __all__ = ["track_people", "select_people", "people_count", "PEOPLE_CHOICES", "parse_people", "BEAM"]
@@ -53,8 +53,8 @@ class _Tracklet:
         return cls(state.boxes(), state.last, state.velocity)
 
 
-def _median_side(track: _Trackletlet) -> float:
-    return float(_side(torch.stack([b[:4] for b in track.boxes.values()])).median())
+def _median_side(track: _Tracklet) -> float:
+    return float(box_side(torch.stack([b[:4] for b in track.boxes.values()])).median())
 
 
 def _end_velocity(a: _Tracklet, b: _Tracklet) -> torch.Tensor:
@@ -74,8 +74,8 @@ def _stitch_cost(a: _Tracklet, b: _Tracklet, max_scale: float) -> float:
     if max(side_a, side_b) / min(side_a, side_b) > max_scale:
         return math.inf
     gap = first - a.last
-    forward = _centre(a.boxes[a.last][:4]) + a.velocity * gap - _centre(b.boxes[first][:4])
-    backward = _centre(b.boxes[first][:4]) - _end_velocity(a, b) * gap - _centre(a.boxes[a.last][:4])
+    forward = box_centre(a.boxes[a.last][:4]) + a.velocity * gap - box_centre(b.boxes[first][:4])
+    backward = box_centre(b.boxes[first][:4]) - _end_velocity(a, b) * gap - box_centre(a.boxes[a.last][:4])
     return float(torch.maximum(forward.norm(), backward.norm())) / max(side_a, side_b)
 
 
@@ -102,7 +102,7 @@ def _stitch(tracks: list[_Tracklet], max_gap: int, max_scale: float, max_jump: f
         tracks = [tr for tr in tracks if tr.boxes]
 
 
-def _dense(track: _Trackletlet, T: int, max_gap: int) -> torch.Tensor:
+def _dense(track: _Tracklet, T: int, max_gap: int) -> torch.Tensor:
     """(T, 5) boxes and scores of a track, gaps of at most ``max_gap`` frames interpolated."""
     out = torch.zeros(T, 5)
     seen = sorted(track.boxes)

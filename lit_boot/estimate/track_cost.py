@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-__all__ = ["TrackState", "pair_costs", "MISS_COST", "SMOOTHING", "KEYPOINT_WEIGHT"]
+__all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "MISS_COST", "SMOOTHING", "KEYPOINT_WEIGHT"]
 
 #: The cost of leaving a track or a detection unmatched in a frame (pair costs lie in [0, 2]).
 MISS_COST = 1.0
@@ -106,7 +106,7 @@ class TrackState:
         if self.seen:
             step = self._joint_step(t, keypoints)
             if step is None:
-                step = (_centre(det[:4]) - _centre(self.box[:4])) / (t - self.last)
+                step = (box_centre(det[:4]) - box_centre(self.box[:4])) / (t - self.last)
             weight = max(smoothing, 1.0 / self.seen) if MEAN_START else (1.0 if self.seen == 1 else smoothing)
             self.velocity = (1 - weight) * self.velocity + weight * step
         self.box, self.last, self.seen = det.clone(), t, self.seen + 1
@@ -114,11 +114,14 @@ class TrackState:
         if keypoints is not None and bool((keypoints[:, 2] > 0).any()):
             self.keypoints, self.keypoint_frame = keypoints.clone(), t
 
-def _centre(box: torch.Tensor) -> torch.Tensor:
+
+def box_centre(box: torch.Tensor) -> torch.Tensor:
+    """The centres (..., 2) px of boxes (..., 4 or more) x0, y0, x1, y1."""
     return (box[..., :2] + box[..., 2:4]) / 2
 
 
-def _side(box: torch.Tensor) -> torch.Tensor:
+def box_side(box: torch.Tensor) -> torch.Tensor:
+    """The larger sides (...) px of boxes (..., 4 or more), at least 1."""
     return (box[..., 2:4] - box[..., :2]).amax(-1).clamp_min(1.0)
 
 
@@ -167,13 +170,13 @@ def pair_costs(tracks: list[TrackState], t: int, dets: torch.Tensor, min_iou: fl
     pred = torch.stack([tr.predicted(t) for tr in tracks])
     gap = torch.tensor([float(t - tr.last) for tr in tracks])
     iou = _iou_matrix(pred, dets[:, :4])
-    dist = (_centre(pred)[:, None] - _centre(dets[:, :4])[None]).norm(dim=-1)
-    reach = max_jump * _side(pred)[:, None] * gap[:, None]
+    dist = (box_centre(pred)[:, None] - box_centre(dets[:, :4])[None]).norm(dim=-1)
+    reach = max_jump * box_side(pred)[:, None] * gap[:, None]
     cost = torch.where(iou >= min_iou, 1 - iou, 1 + dist / reach)
-    ratio = _side(pred)[:, None] / _side(dets[:, :4])[None]
+    ratio = box_side(pred)[:, None] / box_side(dets[:, :4])[None]
     far = (iou < min_iou) & (dist > reach)
     if keypoints is not None and keypoint_weight > 0:
-        where, shape = _keypoint_distance(tracks, t, keypoints, _side(pred))
+        where, shape = _keypoint_distance(tracks, t, keypoints, box_side(pred))
         # the shape against the best-shaped track's for the same detection: it ranks the tracks,
         # and a pair whose shape cannot be measured is neither favoured nor penalised by it
         best = torch.nan_to_num(shape, nan=math.inf).amin(0, keepdim=True)
