@@ -8,7 +8,8 @@ centre, not the person). :func:`pair_costs` gives each (track, detection) pair a
 plus the pose terms: ``1 - IoU`` with the predicted box when they overlap by at least
 ``min_iou``, else ``1 + d / reach`` when the centres are ``d`` px apart within ``reach`` =
 ``max_jump`` x the box's larger side x the frames since it was last seen; a detection further
-away, or more than ``max_scale`` times larger or smaller (larger side), is not that track's (inf).
+away, or more than ``max_scale`` times larger or smaller (larger side), is not that track's (inf);
+:data:`SCALE_WEIGHT` x ``|log|`` of the ratio of the larger sides is added.
 Where the detections come with keypoints, ``keypoint_weight`` x a pose distance is added: the
 median distance of the shared confident joints from the track's last keypoints moved on by its
 velocity, in box sides per frame since those keypoints were seen, plus
@@ -54,6 +55,10 @@ KEYPOINT_PER_FRAME = True
 #: last. A track seen a frame ago predicts better than one unseen for longer, whose keypoint
 #: distance (per frame since seen) is also cheap (BENCHMARKS.md, "Keypoints in the tracker").
 KEYPOINT_GAP_COST = 0.3
+#: The weight of a pair's change of size, ``|log(side / predicted side)|`` of the boxes' larger
+#: sides, in its cost (BENCHMARKS.md, "Tracking with hindsight": a person's size changes little from
+#: frame to frame; a neighbour's box near the predicted one is often larger or smaller).
+SCALE_WEIGHT = 0.5
 #: Where the detections come with keypoints: the weight of a pair's pose-shape distance (box
 #: sides) beyond the best-shaped track's for the same detection, added to the keypoint distance
 #: (BENCHMARKS.md, "The pose's shape in the tracker").
@@ -183,4 +188,5 @@ def pair_costs(tracks: list[TrackState], t: int, dets: torch.Tensor, min_iou: fl
         pose = where + KEYPOINT_SHAPE_WEIGHT * (shape - best)
         cost = cost + keypoint_weight * torch.nan_to_num(pose.clamp_max(1.0), nan=0.0)
         cost = cost + KEYPOINT_GAP_COST * (gap[:, None] - 1)
+    cost = cost + SCALE_WEIGHT * ratio.log().abs()
     return cost.masked_fill(far | (ratio > max_scale) | (ratio < 1 / max_scale), math.inf)
