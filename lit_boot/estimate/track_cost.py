@@ -2,10 +2,10 @@
 
 A track (:class:`TrackState`) predicts its next box from its last one moved on by its velocity (px
 per frame, a running mean of its centre's motion, each frame weighing ``smoothing``, or the plain
-mean of the first steps while each weighs more than that; its joints'
-median motion where it shares enough of them with the last frame: an occluder moves a box's
-centre, not the person). :func:`pair_costs` gives each (track, detection) pair a cost in [0, 2]
-plus the pose terms: ``1 - IoU`` with the predicted box when they overlap by at least
+mean of the first steps while each weighs more than that; its joints' median motion where it
+shares enough of them with the last frame: an occluder moves a box's centre, not the person).
+:func:`pair_costs` gives each (track, detection) pair a box cost in [0, 2] plus the size and pose
+terms: ``1 - IoU`` with the predicted box when they overlap by at least
 ``min_iou``, else ``1 + d / reach`` when the centres are ``d`` px apart within ``reach`` =
 ``max_jump`` x the box's larger side x the frames since it was last seen; a detection further
 away, or more than ``max_scale`` times larger or smaller (larger side), is not that track's (inf);
@@ -29,7 +29,7 @@ import torch
 
 __all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "MISS_COST", "SMOOTHING", "KEYPOINT_WEIGHT"]
 
-#: The cost of leaving a track or a detection unmatched in a frame (pair costs lie in [0, 2]).
+#: The cost of leaving a track or a detection unmatched in a frame (the box terms of a pair lie in [0, 2]).
 MISS_COST = 1.0
 #: The weight of a frame's own motion in a track's velocity (BENCHMARKS.md, "The tracker on
 #: synthetic crossings").
