@@ -1,0 +1,139 @@
+"""The product's own people, end to end, on synthetic scenes with several people: identity
+switches and coverage against the true identities (issue 25's "zero identity switches" bar, with
+a real detector and pose estimator instead of simulated ones).
+
+Each scene's rendered frames go through ``estimate_poses(frames, people="all", detector=YOLOX-Nano)``
+(the top-down estimator a user runs: YOLOX boxes, MediaPipe on each box's crop, the tracker on the
+boxes and poses); every person it returns (a track with a pose) is matched in each frame to the
+true people by the IoU of its box with each one's visible box (the extent of the pixels where that
+person is seen, ``GroundTruth.truths``), an optimal assignment, pairs with IoU >= --min-iou. Per
+true person: the frames it is visible in (at least --min-pixels pixels seen), the share of them
+a returned person covers, and its identity switches (the covering person changes between two
+covered frames, the MOT definition), also counted over its clear frames only (where the box
+that covers it overlaps no other true person by --min-iou: the detector's one box around two
+overlapping people is neither's); and the returned people that cover nobody (false tracks).
+Scenes: make_scene(people=N, frames=--frames, --height x --width, seed, motion by the seed's place
+in --seeds, as benchmarks/people_synth_tracking.py).
+
+Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_e2e.py [--people 2,3] [--seeds 30,31,32,33]
+           [--frames 16] [--height 256] [--width 512] [--min-iou 0.3] [--min-pixels 50]
+           [--detector ../shared/checkpoints/yolox_nano.onnx] [--det-score 0.25] [--det-iou 0.45]
+           [--json out.json]
+
+The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, and the
+returned people that cover nobody.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import torch
+from scipy.optimize import linear_sum_assignment
+
+from lit_boot.estimate import PersonDetector, estimate_poses
+from lit_boot.synth import make_scene
+from people_synth_tracking import MOTIONS
+from real_data import SHARED
+
+
+def visible_boxes(scene, min_pixels: int) -> torch.Tensor:
+    """(P, T, 5) each true person's visible box (x0, y0, x1, y1 px) and 1 where at least
+    ``min_pixels`` of it are seen, in ``scene.people()`` order."""
+    truths = scene.gt.truths([p.track_id for p in scene.people()])
+    out = torch.zeros(len(truths), scene.num_frames, 5)
+    for p, truth in enumerate(truths):
+        for t, mask in enumerate(truth.person_mask):
+            if int(mask.sum()) < min_pixels:
+                continue
+            ys, xs = torch.nonzero(mask, as_tuple=True)
+            out[p, t] = torch.tensor([xs.min(), ys.min(), xs.max(), ys.max(), 1.0], dtype=torch.float32)
+    return out
+
+
+def iou(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """IoU (N, M) of boxes a (N, 4) and b (M, 4), x0, y0, x1, y1 with pixel centres at integers."""
+    lo, hi = torch.maximum(a[:, None, :2], b[None, :, :2]), torch.minimum(a[:, None, 2:4], b[None, :, 2:4])
+    inter = (hi - lo + 1).clamp_min(0).prod(-1)
+    area = lambda x: (x[:, 2:4] - x[:, :2] + 1).clamp_min(0).prod(-1)  # noqa: E731
+    return inter / (area(a)[:, None] + area(b)[None, :] - inter)
+
+
+def score(found: torch.Tensor, truth: torch.Tensor, min_iou: float) -> tuple[list[dict], int]:
+    """Per true person (truth (P, T, 5)): visible frames, covered share, identity switches, and the
+    switches counted over its clear frames only (where the box covering it overlaps no other true
+    person by ``min_iou``: one box around two people is neither's); and how many of the returned
+    people (found (Q, T, 5)) cover nobody in any frame."""
+    P, T = truth.shape[:2]
+    covering = [[None] * T for _ in range(P)]
+    clear = [[False] * T for _ in range(P)]
+    used = set()
+    for t in range(T):
+        here_q = [q for q in range(found.shape[0]) if found[q, t, 4] > 0]
+        here_p = [p for p in range(P) if truth[p, t, 4] > 0]
+        if not here_q or not here_p:
+            continue
+        overlap = iou(found[here_q, t, :4], truth[here_p, t, :4])
+        rows, cols = linear_sum_assignment(-overlap.numpy())
+        for r, c in zip(rows, cols):
+            if overlap[r, c] >= min_iou:
+                covering[here_p[c]][t] = here_q[r]
+                clear[here_p[c]][t] = int((overlap[r] >= min_iou).sum()) == 1
+                used.add(here_q[r])
+    rows = []
+    for p in range(P):
+        seen = [q for q in covering[p] if q is not None]
+        seen_clear = [q for q, c in zip(covering[p], clear[p]) if q is not None and c]
+        visible = int((truth[p, :, 4] > 0).sum())
+        rows.append({"person": p, "visible": visible, "covered": round(len(seen) / max(visible, 1), 3),
+                     "switches": sum(a != b for a, b in zip(seen, seen[1:])),
+                     "clear_switches": sum(a != b for a, b in zip(seen_clear, seen_clear[1:]))})  # fmt: skip
+    return rows, found.shape[0] - len(used)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--people", default="2,3")
+    parser.add_argument("--seeds", default="30,31,32,33")
+    parser.add_argument("--frames", type=int, default=16)
+    parser.add_argument("--height", type=int, default=256)
+    parser.add_argument("--width", type=int, default=512)
+    parser.add_argument("--min-iou", type=float, default=0.3)
+    parser.add_argument("--min-pixels", type=int, default=50)
+    parser.add_argument("--detector", default=str(SHARED / "checkpoints" / "yolox_nano.onnx"))
+    parser.add_argument("--det-score", type=float, default=0.25, help="PersonDetector's score threshold")
+    parser.add_argument("--det-iou", type=float, default=0.45, help="PersonDetector's NMS IoU threshold")
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args()
+    detector = PersonDetector(args.detector, score=args.det_score, iou=args.det_iou)
+    print("| scene | true person: visible frames, covered, identity switches | people returned (false) | s |")
+    print("| --- | --- | --- | --- |")
+    out, total, clear, covered, false_total = [], 0, 0, [], 0
+    for n in (int(v) for v in args.people.split(",")):
+        for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
+            scene = make_scene(frames=args.frames, height=args.height, width=args.width, seed=seed, people=n,
+                               motion=MOTIONS[i % len(MOTIONS)])  # fmt: skip
+            start = time.perf_counter()
+            every = estimate_poses(scene.frames, people="all", detector=detector)
+            seconds = time.perf_counter() - start
+            posed = [p.person_boxes for p in every.people() if p.person_boxes is not None and p.keypoints_conf.amax() > 0]
+            found = torch.stack(posed) if posed else torch.zeros(0, args.frames, 5)
+            rows, false = score(found, visible_boxes(scene, args.min_pixels), args.min_iou)
+            total += sum(r["switches"] for r in rows)
+            clear += sum(r["clear_switches"] for r in rows)
+            covered += [r["covered"] for r in rows]
+            false_total += false
+            cells = "; ".join(f"{r['person']}: {r['visible']}, {r['covered']:.0%}, {r['switches']}" for r in rows)
+            print(f"| {n} people, s{seed} | {cells} | {found.shape[0]} ({false}) | {seconds:.1f} |", flush=True)
+            out.append({"people": n, "seed": seed, "returned": int(found.shape[0]), "false": false, "rows": rows,
+                        "seconds": seconds})  # fmt: skip
+    print(f"identity switches {total} ({clear} over clear frames), covered {sum(covered) / max(len(covered), 1):.0%}, false people {false_total}")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"settings": vars(args), "scenes": out}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
