@@ -17,18 +17,11 @@ from typing import Any
 
 import torch
 
+from .track_cost import iou_matrix
+
 __all__ = ["main_person_boxes", "person_boxes", "check_detections"]
 
 log = logging.getLogger(__name__)
-
-
-def _iou(box: torch.Tensor, boxes: torch.Tensor) -> torch.Tensor:
-    """IoU (N,) of one box (4,) with boxes (N, 4), all x0, y0, x1, y1."""
-    lo, hi = torch.maximum(box[:2], boxes[:, :2]), torch.minimum(box[2:], boxes[:, 2:])
-    inter = (hi - lo).clamp_min(0).prod(1)
-    area = (box[2:] - box[:2]).prod()
-    areas = (boxes[:, 2:] - boxes[:, :2]).prod(1)
-    return inter / (area + areas - inter).clamp_min(1e-9)
 
 
 def _next_box(last: torch.Tensor, candidates: torch.Tensor, frames: int, max_jump: float) -> int | None:
@@ -36,7 +29,7 @@ def _next_box(last: torch.Tensor, candidates: torch.Tensor, frames: int, max_jum
     most overlapping, else the nearest centre within ``max_jump`` x its larger side x ``frames``."""
     if candidates.shape[0] == 0:
         return None
-    overlap = _iou(last, candidates)
+    overlap = iou_matrix(last[None], candidates)[0]
     if overlap.max() > 0:
         return int(overlap.argmax())
     centre = (last[:2] + last[2:]) / 2

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-__all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "MISS_COST", "SMOOTHING", "KEYPOINT_WEIGHT"]
+__all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "iou_matrix", "MISS_COST", "SMOOTHING", "KEYPOINT_WEIGHT"]
 
 #: The cost of leaving a track or a detection unmatched in a frame (the box terms of a pair lie in [0, 2]).
 MISS_COST = 1.0
@@ -130,7 +130,7 @@ def box_side(box: torch.Tensor) -> torch.Tensor:
     return (box[..., 2:4] - box[..., :2]).amax(-1).clamp_min(1.0)
 
 
-def _iou_matrix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+def iou_matrix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """IoU (N, M) of boxes a (N, 4) and b (M, 4)."""
     lo = torch.maximum(a[:, None, :2], b[None, :, :2])
     hi = torch.minimum(a[:, None, 2:4], b[None, :, 2:4])
@@ -174,7 +174,7 @@ def pair_costs(tracks: list[TrackState], t: int, dets: torch.Tensor, min_iou: fl
     each track (the module docstring); inf where a detection cannot be the track's."""
     pred = torch.stack([tr.predicted(t) for tr in tracks])
     gap = torch.tensor([float(t - tr.last) for tr in tracks])
-    iou = _iou_matrix(pred, dets[:, :4])
+    iou = iou_matrix(pred, dets[:, :4])
     dist = (box_centre(pred)[:, None] - box_centre(dets[:, :4])[None]).norm(dim=-1)
     reach = max_jump * box_side(pred)[:, None] * gap[:, None]
     cost = torch.where(iou >= min_iou, 1 - iou, 1 + dist / reach)

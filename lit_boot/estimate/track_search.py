@@ -117,11 +117,12 @@ def _open_at(h: _Hypothesis, t: int, max_gap: int) -> tuple[list[TrackState], tu
     return open_, ended
 
 
-def _extend(h: _Hypothesis, t: int, dets: torch.Tensor, kps: torch.Tensor | None, pairs: list[tuple[int, int]],
-            total: float, max_gap: int, smoothing: float) -> _Hypothesis:  # fmt: skip
-    """``h`` with frame ``t``'s detections given by ``pairs`` (open track, detection); the others
-    start new tracks. Only the tracks that change are copied."""
-    tracks, ended = _open_at(h, t, max_gap)
+def _extend(opened: tuple[list[TrackState], tuple | None], t: int, dets: torch.Tensor, kps: torch.Tensor | None,
+            pairs: list[tuple[int, int]], total: float, smoothing: float) -> _Hypothesis:  # fmt: skip
+    """A hypothesis's open and ended tracks ``opened`` (:func:`_open_at` in frame ``t``) with the
+    frame's detections given by ``pairs`` (open track, detection); the others start new tracks.
+    Only the tracks that change are copied."""
+    tracks, ended = list(opened[0]), opened[1]
     matched = set()
     for r, c in pairs:
         tracks[r] = replace(tracks[r])
@@ -150,9 +151,9 @@ def link(detections: Sequence[torch.Tensor], keypoints: Sequence[torch.Tensor] |
     hypotheses = [_Hypothesis(0.0, [])]
     for t, dets in enumerate(detections):
         kps = None if keypoints is None else keypoints[t]
-        options = []
+        options, opened = [], [_open_at(h, t, max_gap) for h in hypotheses]
         for i, h in enumerate(hypotheses):
-            open_, _ = _open_at(h, t, max_gap)
+            open_ = opened[i][0]
             if open_ and dets.shape[0]:
                 cost = pair_costs(open_, t, dets, keypoints=kps, **cost_options)
                 ranked = best_assignments(cost, BRANCHES if beam > 1 else 1)
@@ -161,7 +162,7 @@ def link(detections: Sequence[torch.Tensor], keypoints: Sequence[torch.Tensor] |
             rebate = (MISS_COST - UNSEEN_COST) * len(open_)  # the same for each of h's options
             options += [(h.cost + total - rebate, i, pairs) for total, pairs in ranked]
         options.sort(key=lambda o: o[0])
-        hypotheses = [_extend(hypotheses[i], t, dets, kps, pairs, total, max_gap, smoothing)
+        hypotheses = [_extend(opened[i], t, dets, kps, pairs, total, smoothing)
                       for total, i, pairs in options[:beam]]  # fmt: skip
     best, tracks = hypotheses[0], list(hypotheses[0].open)
     node = best.ended
