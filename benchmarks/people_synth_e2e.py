@@ -12,6 +12,9 @@ a returned person covers, and its identity switches (the covering person changes
 covered frames, the MOT definition), also counted over its clear frames only (where the box
 that covers it overlaps no other true person by --min-iou: the detector's one box around two
 overlapping people is neither's); and the returned people that cover nobody (false tracks).
+Also by the poses, what the method paints: per true person the frames where a returned person's
+pose lies on it (median joint distance below --max-pose-dist of its size) and the switches of the
+returned person whose pose that is.
 Scenes: make_scene(people=N, frames=--frames, --height x --width, seed, motion by the seed's place
 in --seeds, as benchmarks/people_synth_tracking.py).
 
@@ -20,8 +23,8 @@ Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_e2e.py [--people 2,3] [-
            [--detector ../shared/checkpoints/yolox_nano.onnx] [--det-score 0.25] [--det-iou 0.45]
            [--json out.json]
 
-The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, and the
-returned people that cover nobody.
+The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, the
+returned people that cover nobody, and the frames with a pose on a true person and those poses' switches.
 """
 
 from __future__ import annotations
@@ -94,6 +97,38 @@ def score(found: torch.Tensor, truth: torch.Tensor, min_iou: float) -> tuple[lis
     return rows, found.shape[0] - len(used)
 
 
+def pose_switches(people: list, truths: list, visible: torch.Tensor, max_dist: float) -> list[dict]:
+    """Per true person: the frames a returned person's pose lies on it, and that pose's identity
+    switches. A pose (``people``: PoseEstimates, coco17) lies on a true person (``truths``: each
+    one's keypoints2d (T, 17, 2)) where the median distance of its confident joints (> 0.3, at least
+    4) from the true ones is below ``max_dist`` x the true keypoints' larger extent (an optimal
+    assignment per frame, among the people visible (P, T))."""
+    P, T = visible.shape
+    covering = [[None] * T for _ in range(P)]
+    for t in range(T):
+        here_p = [p for p in range(P) if visible[p, t]]
+        cost = torch.full((len(people), len(here_p)), float("inf"))
+        for q, est in enumerate(people):
+            confident = est.keypoints_conf[t] > 0.3
+            if int(confident.sum()) < 4:
+                continue
+            for j, p in enumerate(here_p):
+                true = truths[p].keypoints2d[t]
+                size = float((true.amax(0) - true.amin(0)).max().clamp_min(1.0))
+                cost[q, j] = (est.keypoints2d[t, confident] - true[confident]).norm(dim=-1).median() / size
+        if not len(here_p) or not len(people):
+            continue
+        rows, cols = linear_sum_assignment(torch.nan_to_num(cost, posinf=1e6).numpy())
+        for r, c in zip(rows, cols):
+            if cost[r, c] < max_dist:
+                covering[here_p[c]][t] = r
+    out = []
+    for p in range(P):
+        seen = [q for q in covering[p] if q is not None]
+        out.append({"pose_frames": len(seen), "pose_switches": sum(a != b for a, b in zip(seen, seen[1:]))})
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--people", default="2,3")
@@ -104,14 +139,17 @@ def main() -> None:
     parser.add_argument("--min-iou", type=float, default=0.3)
     parser.add_argument("--min-pixels", type=int, default=50)
     parser.add_argument("--detector", default=str(SHARED / "checkpoints" / "yolox_nano.onnx"))
+    parser.add_argument("--max-pose-dist", type=float, default=0.15,
+                        help="a pose lies on a true person within this share of its size (median joint)")
     parser.add_argument("--det-score", type=float, default=0.25, help="PersonDetector's score threshold")
     parser.add_argument("--det-iou", type=float, default=0.45, help="PersonDetector's NMS IoU threshold")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     detector = PersonDetector(args.detector, score=args.det_score, iou=args.det_iou)
-    print("| scene | true person: visible frames, covered, identity switches | people returned (false) | s |")
+    print("| scene | true person: visible frames, covered, identity switches (pose: frames, switches) | people returned "
+          "(false) | s |")  # fmt: skip
     print("| --- | --- | --- | --- |")
-    out, total, clear, covered, false_total = [], 0, 0, [], 0
+    out, total, clear, covered, false_total, poses, pose_frames = [], 0, 0, [], 0, 0, 0
     for n in (int(v) for v in args.people.split(",")):
         for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
             scene = make_scene(frames=args.frames, height=args.height, width=args.width, seed=seed, people=n,
@@ -119,18 +157,26 @@ def main() -> None:
             start = time.perf_counter()
             every = estimate_poses(scene.frames, people="all", detector=detector)
             seconds = time.perf_counter() - start
-            posed = [p.person_boxes for p in every.people() if p.person_boxes is not None and p.keypoints_conf.amax() > 0]
-            found = torch.stack(posed) if posed else torch.zeros(0, args.frames, 5)
-            rows, false = score(found, visible_boxes(scene, args.min_pixels), args.min_iou)
+            posed = [p for p in every.people() if p.person_boxes is not None and p.keypoints_conf.amax() > 0]
+            found = torch.stack([p.person_boxes for p in posed]) if posed else torch.zeros(0, args.frames, 5)
+            truth = visible_boxes(scene, args.min_pixels)
+            rows, false = score(found, truth, args.min_iou)
+            truths = scene.gt.truths([p.track_id for p in scene.people()])
+            for row, on_pose in zip(rows, pose_switches(posed, truths, truth[..., 4] > 0, args.max_pose_dist)):
+                row.update(on_pose)
+            poses += sum(r["pose_switches"] for r in rows)
+            pose_frames += sum(r["pose_frames"] for r in rows)
             total += sum(r["switches"] for r in rows)
             clear += sum(r["clear_switches"] for r in rows)
             covered += [r["covered"] for r in rows]
             false_total += false
-            cells = "; ".join(f"{r['person']}: {r['visible']}, {r['covered']:.0%}, {r['switches']}" for r in rows)
+            cells = "; ".join(f"{r['person']}: {r['visible']}, {r['covered']:.0%}, {r['switches']} "
+                              f"(pose {r['pose_frames']}, {r['pose_switches']})" for r in rows)  # fmt: skip
             print(f"| {n} people, s{seed} | {cells} | {found.shape[0]} ({false}) | {seconds:.1f} |", flush=True)
             out.append({"people": n, "seed": seed, "returned": int(found.shape[0]), "false": false, "rows": rows,
                         "seconds": seconds})  # fmt: skip
-    print(f"identity switches {total} ({clear} over clear frames), covered {sum(covered) / max(len(covered), 1):.0%}, false people {false_total}")
+    print(f"identity switches {total} ({clear} over clear frames), covered {sum(covered) / max(len(covered), 1):.0%}, "
+          f"false people {false_total}; poses on a true person {pose_frames} frames, their switches {poses}")
     if args.json:
         Path(args.json).write_text(json.dumps({"settings": vars(args), "scenes": out}, indent=1))
 
