@@ -21,6 +21,7 @@ in --seeds, as benchmarks/people_synth_tracking.py).
 Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_e2e.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--height 256] [--width 512] [--min-iou 0.3] [--min-pixels 50]
            [--detector ../shared/checkpoints/yolox_nano.onnx] [--det-score 0.25] [--det-iou 0.45]
+           [--on-jump keep] [--max-jump 0.5]
            [--json out.json]
 
 The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, the
@@ -141,6 +142,8 @@ def main() -> None:
     parser.add_argument("--detector", default=str(SHARED / "checkpoints" / "yolox_nano.onnx"))
     parser.add_argument("--max-pose-dist", type=float, default=0.15,
                         help="a pose lies on a true person within this share of its size (median joint)")
+    parser.add_argument("--on-jump", default="keep", help="estimate_poses' on_jump (keep, drop)")
+    parser.add_argument("--max-jump", type=float, default=0.5, help="estimate_poses' max_jump")
     parser.add_argument("--det-score", type=float, default=0.25, help="PersonDetector's score threshold")
     parser.add_argument("--det-iou", type=float, default=0.45, help="PersonDetector's NMS IoU threshold")
     parser.add_argument("--json", default=None)
@@ -155,7 +158,8 @@ def main() -> None:
             scene = make_scene(frames=args.frames, height=args.height, width=args.width, seed=seed, people=n,
                                motion=MOTIONS[i % len(MOTIONS)])  # fmt: skip
             start = time.perf_counter()
-            every = estimate_poses(scene.frames, people="all", detector=detector)
+            every = estimate_poses(scene.frames, people="all", detector=detector, on_jump=args.on_jump,
+                                   max_jump=args.max_jump)  # fmt: skip
             seconds = time.perf_counter() - start
             posed = [p for p in every.people() if p.person_boxes is not None and p.keypoints_conf.amax() > 0]
             found = torch.stack([p.person_boxes for p in posed]) if posed else torch.zeros(0, args.frames, 5)
