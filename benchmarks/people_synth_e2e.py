@@ -30,7 +30,6 @@ returned people that cover nobody, and the frames with a pose on a true person a
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from pathlib import Path
@@ -40,7 +39,7 @@ from scipy.optimize import linear_sum_assignment
 
 from lit_boot.estimate import PersonDetector, estimate_poses
 from lit_boot.synth import make_scene
-from people_synth_tracking import MOTIONS
+from people_synth_tracking import MOTIONS, scene_parser
 from real_data import SHARED
 
 
@@ -131,10 +130,7 @@ def pose_switches(people: list, truths: list, visible: torch.Tensor, max_dist: f
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--people", default="2,3")
-    parser.add_argument("--seeds", default="30,31,32,33")
-    parser.add_argument("--frames", type=int, default=16)
+    parser = scene_parser(__doc__.splitlines()[0])
     parser.add_argument("--height", type=int, default=256)
     parser.add_argument("--width", type=int, default=512)
     parser.add_argument("--min-iou", type=float, default=0.3)

@@ -109,11 +109,17 @@ def grid(args: argparse.Namespace) -> str:
             f"{per_miss[0]} / {per_miss[1]} / {per_miss[2]}, {sum(per_miss)}")  # fmt: skip
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--people", default="2,3")
-    parser.add_argument("--seeds", default="30,31,32,33")
+def scene_parser(description: str) -> argparse.ArgumentParser:
+    """A parser with the scenes' own options: --people, --seeds, --frames."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--people", default="2,3", help="people per scene, comma-separated")
+    parser.add_argument("--seeds", default="30,31,32,33", help="the motion follows a seed's place here")
     parser.add_argument("--frames", type=int, default=16)
+    return parser
+
+
+def main() -> None:
+    parser = scene_parser(__doc__.splitlines()[0])
     parser.add_argument("--jitter", type=float, default=0.05)
     parser.add_argument("--miss", type=float, default=0.1)
     parser.add_argument("--smoothing", type=float, default=None, help="track_people's smoothing (default: its own)")
