@@ -200,3 +200,35 @@ def test_another_estimator_plugs_in_through_the_protocol():
     assert torch.allclose(other.keypoints2d[0, 0], torch.tensor([150.0, 70.0]))
     assert (main.keypoints_conf[2] == 0).all() and (main.keypoints_conf[[0, 1, 3]] == 1).all()  # frame 2: not theirs
     assert [r["not_theirs"] for r in est.metadata["people"]] == [1, 1]
+
+
+def test_a_pose_two_crops_give_counts_for_the_box_that_fits_it():
+    """A second, looser box around A beside A's own (as a detector's box around two people who
+    overlap): both crops show A; the pose counts for A's own box (it fits the pose), the loose box
+    has none and is left out."""
+    frames, _ = two_people()
+    frames[-1, :, 70, 128] = 0  # no neighbour
+    a, loose = [20.0, 10.0, 60.0, 110.0, 0.9], [10.0, 5.0, 110.0, 115.0, 0.8]
+    est = estimate_people(crops(frames), frames, KnownBoxes([[a, loose]] * 4), "all")
+    assert est.num_people == 1 and torch.equal(est.person_boxes[:, :4], torch.tensor([a[:4]] * 4))
+    assert len(est.metadata["people"]) == 2 and est.metadata["people_without_pose"] != []
+    assert sum(r["duplicates"] for r in est.metadata["people"]) == 4
+    assert all(r["pose_frames"] == 0 for r in est.metadata["people"] if r["duplicates"])
+
+
+def test_duplicate_frames_drops_the_worse_fitting_copy_only():
+    from lit_boot.estimate.pose_duplicates import duplicate_frames
+
+    pose = torch.tensor([[10.0, 10.0], [20.0, 10.0], [10.0, 40.0], [20.0, 40.0], [15.0, 60.0]])
+    elsewhere = pose + torch.tensor([50.0, 0.0])
+    conf = torch.ones(3, 5)
+    a = torch.stack([pose, pose, pose])
+    b = torch.stack([elsewhere, pose + 0.5, pose])  # frame 1: the same pose; frame 2 too, few joints shared
+    conf_b = conf.clone()
+    conf_b[2, 2:] = 0
+    tight = torch.tensor([[10.0, 10.0, 20.0, 60.0, 1.0]] * 3)
+    loose = torch.tensor([[0.0, 0.0, 90.0, 80.0, 1.0]] * 3)
+    drop_a, drop_b = duplicate_frames([a, b], [conf, conf_b], [tight, loose])
+    assert drop_a.tolist() == [False, False, False] and drop_b.tolist() == [False, True, False]
+    drop_a, drop_b = duplicate_frames([a, b], [conf, conf_b], [loose, tight])  # the other box fits: A's goes
+    assert drop_a.tolist() == [False, True, False] and drop_b.tolist() == [False, False, False]

@@ -9,7 +9,9 @@ prominent) and gives each track the poses of its boxes (the crops of the frames 
 run then; :class:`MediaPipeCrops` runs each crop once). A crop may show a neighbour more clearly
 than the detection's person: a pose counts for it only where the centre of its confident
 keypoints' box (those inside the frame) lies inside the box (else the frame has confidence 0 for
-that person, counted in ``metadata["people"][i]["not_theirs"]``). A track on which no pose is
+that person, counted in ``metadata["people"][i]["not_theirs"]``); a pose two tracks' crops
+both give counts for the one whose box fits it best (:mod:`.pose_duplicates`; the other's frames
+counted in ``metadata["people"][i]["duplicates"]``). A track on which no pose is
 found in any frame is left out (``metadata["people_without_pose"]``). Person 0 (the main person) is the most prominent
 track with a pose; track ids number the tracks by prominence. Another estimator plugs in through
 :class:`PersonPoseEstimator` (two methods); MediaPipe is :class:`MediaPipeCrops`.
@@ -26,6 +28,7 @@ from ..core.cameras import inside_image
 from ..core.people import Person
 from ..data.readers.pose_file import PoseEstimates
 from .people_track import select_people, track_people
+from .pose_duplicates import duplicate_frames
 from .tracking import body_box
 
 __all__ = ["estimate_people", "detection_keypoints", "pose_in_box", "PersonPoseEstimator", "MediaPipeCrops",
@@ -164,12 +167,16 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
     detections = [torch.as_tensor(d, dtype=torch.float32).reshape(-1, 5) for d in detector.detect_frames(frames)]
     keypoints = detection_keypoints(estimator, frames, detections)
     tracks = select_people(track_people(detections, keypoints=keypoints), people)
+    found = [_one_person(estimator, frames, boxes) for boxes in tracks]
+    duplicates = duplicate_frames([est.keypoints2d for est, _ in found], [est.keypoints_conf for est, _ in found],
+                                  list(tracks))  # fmt: skip
     estimates, records = [], []
-    for track_id, boxes in enumerate(tracks):
-        est, not_theirs = _one_person(estimator, frames, boxes)
+    for track_id, (boxes, (est, not_theirs), twice) in enumerate(zip(tracks, found, duplicates)):
+        est = estimator.keep_frames(est, ~twice) if bool(twice.any()) else est
         estimates.append(replace(est, person_boxes=boxes, track_id=track_id))
         records.append({"track_id": track_id, "box_frames": int((boxes[:, 4] > 0).sum()),
-                        "pose_frames": int(est.found().sum()), "not_theirs": not_theirs})  # fmt: skip
+                        "pose_frames": int(est.found().sum()), "not_theirs": not_theirs,
+                        "duplicates": int(twice.sum())})  # fmt: skip
     with_pose = [est for est in estimates if bool(est.found().any())]
     meta = {**(meta or {}), "people": records, "people_asked": people, "tracks": len(tracks),
             "people_without_pose": [r["track_id"] for r in records if not r["pose_frames"]]}  # fmt: skip

@@ -1,0 +1,58 @@
+"""One pose, one person: where two tracks' crops give the same pose, it counts for one of them.
+
+Where two people overlap, the detector often gives one box around both beside a box of one of
+them, and the pose estimator finds the same person in both crops; painted twice under two track
+ids, that person's motion would also be taught as the other's. :func:`duplicate_frames` finds,
+in every frame, the pairs of people whose poses coincide (the median distance of the joints
+confident in both, at least :data:`MIN_JOINTS`, below :data:`MAX_DISTANCE` x the pose's size)
+and gives the pose to the person whose box fits it best (the IoU of the box with the extent of
+the pose's confident keypoints): the other person has no pose in that frame. Keypoints are px;
+boxes x0, y0, x1, y1 px with pixel centres at integer coordinates (:mod:`.detector`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+
+from .track_cost import iou_matrix
+
+__all__ = ["duplicate_frames", "MAX_DISTANCE", "MIN_JOINTS"]
+
+#: Two poses are one where their shared joints' median distance is below this share of the pose's
+#: size (the larger side of its confident keypoints' extent).
+MAX_DISTANCE = 0.1
+#: The joints (confident in both poses, above CONF) that must be shared to compare two poses.
+MIN_JOINTS = 4
+CONF = 0.3
+
+
+def _extent(keypoints: torch.Tensor, confident: torch.Tensor) -> torch.Tensor:
+    """(4,) x0, y0, x1, y1 of the confident keypoints (K, 2)."""
+    points = keypoints[confident]
+    return torch.cat([points.amin(0), points.amax(0)])
+
+
+def duplicate_frames(keypoints: Sequence[torch.Tensor], confidence: Sequence[torch.Tensor],
+                     boxes: Sequence[torch.Tensor]) -> list[torch.Tensor]:  # fmt: skip
+    """For P people, each one's keypoints (T, K, 2) px, confidences (T, K) (0: not found) and
+    boxes (T, 5): per person a (T,) bool of the frames where its pose is another person's too and
+    that person's box fits it better (ties: the earlier person keeps it)."""
+    P = len(keypoints)
+    drop = [torch.zeros(c.shape[0], dtype=torch.bool) for c in confidence]
+    for t in range(drop[0].shape[0] if P else 0):
+        confident = [confidence[p][t] > CONF for p in range(P)]
+        for a in range(P):
+            for b in range(a + 1, P):
+                shared = confident[a] & confident[b]
+                if int(shared.sum()) < MIN_JOINTS or drop[a][t] or drop[b][t]:
+                    continue
+                pose = _extent(keypoints[a][t], confident[a])
+                size = float((pose[2:] - pose[:2]).max().clamp_min(1.0))
+                if float((keypoints[a][t, shared] - keypoints[b][t, shared]).norm(dim=-1).median()) >= MAX_DISTANCE * size:
+                    continue
+                fit = [float(iou_matrix(_extent(keypoints[p][t], confident[p])[None], boxes[p][t, None, :4])[0, 0])
+                       for p in (a, b)]  # fmt: skip
+                drop[b if fit[0] >= fit[1] else a][t] = True
+    return drop
