@@ -23,7 +23,8 @@ __all__ = ["duplicate_frames", "MAX_DISTANCE", "MIN_JOINTS"]
 #: Two poses are one where their shared joints' median distance is below this share of the pose's
 #: size (the larger side of its confident keypoints' extent).
 MAX_DISTANCE = 0.1
-#: The joints (confident in both poses, above CONF) that must be shared to compare two poses.
+#: The joints (confident in both poses) that must be shared to compare two poses, and the
+#: confidence above which a joint counts.
 MIN_JOINTS = 4
 CONF = 0.3
 
@@ -50,7 +51,8 @@ def duplicate_frames(keypoints: Sequence[torch.Tensor], confidence: Sequence[tor
                     continue
                 pose = _extent(keypoints[a][t], confident[a])
                 size = float((pose[2:] - pose[:2]).max().clamp_min(1.0))
-                if float((keypoints[a][t, shared] - keypoints[b][t, shared]).norm(dim=-1).median()) >= MAX_DISTANCE * size:
+                apart = (keypoints[a][t, shared] - keypoints[b][t, shared]).norm(dim=-1).median()
+                if float(apart) >= MAX_DISTANCE * size:
                     continue
                 fit = [float(iou_matrix(_extent(keypoints[p][t], confident[p])[None], boxes[p][t, None, :4])[0, 0])
                        for p in (a, b)]  # fmt: skip
