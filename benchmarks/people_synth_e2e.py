@@ -145,8 +145,8 @@ def main() -> None:
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     detector = PersonDetector(args.detector, score=args.det_score, iou=args.det_iou)
-    print("| scene | true person: visible frames, covered, identity switches (pose: frames, switches) | people returned "
-          "(false) | s |")  # fmt: skip
+    print("| scene | true person: visible frames, covered, identity switches (pose: frames, switches) "
+          "| people returned (false) | s |")  # fmt: skip
     print("| --- | --- | --- | --- |")
     out, total, clear, covered, false_total, poses, pose_frames = [], 0, 0, [], 0, 0, 0
     for n in (int(v) for v in args.people.split(",")):

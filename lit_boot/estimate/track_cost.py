@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-__all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "iou_matrix", "MISS_COST", "SMOOTHING", "KEYPOINT_WEIGHT"]
+__all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "iou_matrix", "MISS_COST", "SMOOTHING",
+           "KEYPOINT_WEIGHT"]
 
 #: The cost of leaving a track or a detection unmatched in a frame (the box terms of a pair lie in [0, 2]).
 MISS_COST = 1.0
