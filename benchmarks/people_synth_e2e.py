@@ -38,13 +38,15 @@ import torch
 from scipy.optimize import linear_sum_assignment
 
 from lit_boot.estimate import PersonDetector, estimate_poses
+from lit_boot.estimate.track_cost import iou_matrix
 from lit_boot.synth import make_scene
 from people_synth_tracking import MOTIONS, scene_parser
 from real_data import SHARED
 
 
 def visible_boxes(scene, min_pixels: int) -> torch.Tensor:
-    """(P, T, 5) each true person's visible box (x0, y0, x1, y1 px) and 1 where at least
+    """(P, T, 5) each true person's visible box (x0, y0, x1, y1 px: the edges of its seen pixels, pixel
+    centres at integer coordinates, as the detector's boxes) and 1 where at least
     ``min_pixels`` of it are seen, in ``scene.people()`` order."""
     truths = scene.gt.truths([p.track_id for p in scene.people()])
     out = torch.zeros(len(truths), scene.num_frames, 5)
@@ -53,16 +55,9 @@ def visible_boxes(scene, min_pixels: int) -> torch.Tensor:
             if int(mask.sum()) < min_pixels:
                 continue
             ys, xs = torch.nonzero(mask, as_tuple=True)
-            out[p, t] = torch.tensor([xs.min(), ys.min(), xs.max(), ys.max(), 1.0], dtype=torch.float32)
+            edges = torch.tensor([xs.min() - 0.5, ys.min() - 0.5, xs.max() + 0.5, ys.max() + 0.5])
+            out[p, t] = torch.cat([edges, torch.ones(1)])
     return out
-
-
-def iou(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """IoU (N, M) of boxes a (N, 4) and b (M, 4), x0, y0, x1, y1 with pixel centres at integers."""
-    lo, hi = torch.maximum(a[:, None, :2], b[None, :, :2]), torch.minimum(a[:, None, 2:4], b[None, :, 2:4])
-    inter = (hi - lo + 1).clamp_min(0).prod(-1)
-    area = lambda x: (x[:, 2:4] - x[:, :2] + 1).clamp_min(0).prod(-1)  # noqa: E731
-    return inter / (area(a)[:, None] + area(b)[None, :] - inter)
 
 
 def score(found: torch.Tensor, truth: torch.Tensor, min_iou: float) -> tuple[list[dict], int]:
@@ -79,7 +74,7 @@ def score(found: torch.Tensor, truth: torch.Tensor, min_iou: float) -> tuple[lis
         here_p = [p for p in range(P) if truth[p, t, 4] > 0]
         if not here_q or not here_p:
             continue
-        overlap = iou(found[here_q, t, :4], truth[here_p, t, :4])
+        overlap = iou_matrix(found[here_q, t, :4], truth[here_p, t, :4])
         rows, cols = linear_sum_assignment(-overlap.numpy())
         for r, c in zip(rows, cols):
             if overlap[r, c] >= min_iou:

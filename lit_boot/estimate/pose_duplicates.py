@@ -54,7 +54,7 @@ def duplicate_frames(keypoints: Sequence[torch.Tensor], confidence: Sequence[tor
                 apart = (keypoints[a][t, shared] - keypoints[b][t, shared]).norm(dim=-1).median()
                 if float(apart) >= MAX_DISTANCE * size:
                     continue
-                fit = [float(iou_matrix(_extent(keypoints[p][t], confident[p])[None], boxes[p][t, None, :4])[0, 0])
-                       for p in (a, b)]  # fmt: skip
-                drop[b if fit[0] >= fit[1] else a][t] = True
+                fit_a, fit_b = (float(iou_matrix(extent[None], boxes[p][t, None, :4])[0, 0])
+                                for p, extent in ((a, pose), (b, _extent(keypoints[b][t], confident[b]))))  # fmt: skip
+                drop[b if fit_a >= fit_b else a][t] = True
     return drop
