@@ -202,18 +202,61 @@ def test_another_estimator_plugs_in_through_the_protocol():
     assert [r["not_theirs"] for r in est.metadata["people"]] == [1, 1]
 
 
-def test_a_pose_two_crops_give_counts_for_the_box_that_fits_it():
+def test_a_box_whose_pose_another_box_fits_better_is_dropped_before_tracking():
     """A second, looser box around A beside A's own (as a detector's box around two people who
-    overlap): both crops show A; the pose counts for A's own box (it fits the pose), the loose box
-    has none and is left out."""
+    overlap): both crops show A; the loose box is dropped in each frame (it would start a second
+    track on A), A's own box keeps the pose; where the loose box is alone it stays."""
     frames, _ = two_people()
     frames[-1, :, 70, 128] = 0  # no neighbour
     a, loose = [20.0, 10.0, 60.0, 110.0, 0.9], [10.0, 5.0, 110.0, 115.0, 0.8]
-    est = estimate_people(crops(frames), frames, KnownBoxes([[a, loose]] * 4), "all")
-    assert est.num_people == 1 and torch.equal(est.person_boxes[:, :4], torch.tensor([a[:4]] * 4))
-    assert len(est.metadata["people"]) == 2 and est.metadata["people_without_pose"] != []
-    assert sum(r["duplicates"] for r in est.metadata["people"]) == 4
-    assert all(r["pose_frames"] == 0 for r in est.metadata["people"] if r["duplicates"])
+    est = estimate_people(crops(frames), frames, KnownBoxes([[a, loose]] * 3 + [[loose]]), "all")
+    assert est.num_people == 1 and len(est.metadata["people"]) == 1 and est.metadata["duplicate_detections"] == 3
+    assert torch.equal(est.person_boxes[:3, :4], torch.tensor([a[:4]] * 3))
+    assert torch.equal(est.person_boxes[3, :4], torch.tensor(loose[:4])) and est.found().all()
+
+
+class OnWhoeverIsThere:
+    """An estimator whose crop shows the person whose pose centre is nearest the box's centre
+    among those in ``seen`` (per frame, the x of each visible person; a pose 30 x 80 px)."""
+
+    layout = torch.stack([torch.linspace(-15, 15, 17).roll(5), torch.linspace(20, 100, 17)], -1)
+
+    def __init__(self, seen):
+        self.seen = seen
+
+    def estimate_person(self, frames, boxes):
+        from lit_boot.data.readers import PoseEstimates
+
+        T = boxes.shape[0]
+        kp, conf = torch.zeros(T, 17, 2), torch.zeros(T, 17)
+        for t in range(T):
+            if boxes[t, 4] > 0 and self.seen[t]:
+                centre = float(boxes[t, 0] + boxes[t, 2]) / 2
+                x = min(self.seen[t], key=lambda v: abs(v - centre))
+                kp[t], conf[t] = self.layout + torch.tensor([x, 0.0]), 1.0
+        return PoseEstimates(keypoints2d=kp, keypoints_conf=conf, keypoints_layout="coco17")
+
+    def keep_frames(self, estimates, keep):
+        return mask_frames(estimates, keep)
+
+
+def test_a_pose_in_a_bridged_crop_counts_for_the_detection_that_gave_it():
+    """A stands at x = 100 (a loose box); B walks across behind A, undetected in frame 2, where
+    the tracker's bridged box for B is tight around A's pose: both crops show A. The pose counts
+    for A's detection, not for B's guessed box, though that one fits it better."""
+    a = [60.0, 10.0, 140.0, 110.0, 0.9]
+    b = [[x - 15.0, 20.0, x + 15.0, 100.0, 0.8] for x in (40.0, 70.0, 100.0, 130.0, 160.0)]
+    per_frame = [[a, b[t]] if t != 2 else [a] for t in range(5)]
+    seen = [[100.0, 40.0], [100.0, 70.0], [100.0], [100.0, 130.0], [100.0, 160.0]]
+    frames = torch.zeros(5, 3, H, W, dtype=torch.uint8)
+    est = estimate_people(OnWhoeverIsThere(seen), frames, KnownBoxes(per_frame), "all")
+    assert est.num_people == 2
+    main, other = est.people()
+    assert torch.equal(other.person_boxes[2, :4], torch.tensor([85.0, 20.0, 115.0, 100.0]))  # bridged
+    posed = lambda person: (person.keypoints_conf > 0).any(-1).tolist()  # noqa: E731
+    assert all(posed(main)) and posed(other) == [True, True, False, True, True]
+    assert torch.allclose(main.keypoints2d[2], OnWhoeverIsThere.layout + torch.tensor([100.0, 0.0]))
+    assert [r["duplicates"] for r in est.metadata["people"]] == [0, 1]
 
 
 def test_duplicate_frames_drops_the_worse_fitting_copy_only():
@@ -232,3 +275,22 @@ def test_duplicate_frames_drops_the_worse_fitting_copy_only():
     assert drop_a.tolist() == [False, False, False] and drop_b.tolist() == [False, True, False]
     drop_a, drop_b = duplicate_frames([a, b], [conf, conf_b], [loose, tight])  # the other box fits: A's goes
     assert drop_a.tolist() == [False, True, False] and drop_b.tolist() == [False, False, False]
+    bridged_b = torch.tensor([False, True, False])  # B's box in frame 1 is the tracker's guess: A's detection keeps it
+    drop_a, drop_b = duplicate_frames([a, b], [conf, conf_b], [loose, tight], [torch.zeros(3, dtype=bool), bridged_b])
+    assert drop_a.tolist() == [False, False, False] and drop_b.tolist() == [False, True, False]
+
+
+def test_duplicate_detections_and_bridged_frames():
+    from lit_boot.estimate.people_pose import bridged_frames
+    from lit_boot.estimate.pose_duplicates import duplicate_detections
+
+    pose = torch.cat([OnWhoeverIsThere.layout + torch.tensor([100.0, 0.0]), torch.ones(17, 1)], -1)
+    other = pose + torch.tensor([60.0, 0.0, 0.0])
+    tight, loose, far = [85.0, 20.0, 115.0, 100.0, 0.5], [40.0, 10.0, 150.0, 110.0, 0.9], [145.0, 20.0, 175.0, 100.0, 0.7]
+    dets = [torch.tensor([loose, tight, far]), torch.tensor([loose, far]), torch.zeros(0, 5)]
+    kps = [torch.stack([pose, pose, other]), torch.stack([pose, pose * torch.tensor([1.0, 1.0, 0.0])]),
+           torch.zeros(0, 17, 3)]  # fmt: skip
+    drop = duplicate_detections(dets, kps)
+    assert [d.tolist() for d in drop] == [[True, False, False], [False, False], []]  # no pose: no duplicate
+    boxes = torch.tensor([tight, [90.0, 20.0, 120.0, 100.0, 0.6], [0.0] * 5])
+    assert bridged_frames(boxes, dets).tolist() == [False, True, False]

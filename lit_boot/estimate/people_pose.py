@@ -9,9 +9,13 @@ prominent) and gives each track the poses of its boxes (the crops of the frames 
 run then; :class:`MediaPipeCrops` runs each crop once). A crop may show a neighbour more clearly
 than the detection's person: a pose counts for it only where the centre of its confident
 keypoints' box (those inside the frame) lies inside the box (else the frame has confidence 0 for
-that person, counted in ``metadata["people"][i]["not_theirs"]``); a pose two tracks' crops
-both give counts for the one whose box fits it best (:mod:`.pose_duplicates`; the other's frames
-counted in ``metadata["people"][i]["duplicates"]``). A track on which no pose is
+that person, counted in ``metadata["people"][i]["not_theirs"]``). One pose, one person
+(:mod:`.pose_duplicates`): before tracking, a detection whose crop gives the same pose as another
+detection's in that frame, with a box that fits the pose worse (a box around two overlapping
+people beside a box of one of them), is dropped (counted in ``metadata["duplicate_detections"]``);
+after, a pose two tracks' crops both give counts for the track whose box there is a detection
+rather than the tracker's guess across a gap (:func:`bridged_frames`), else for the one whose box
+fits it best (the other's frames counted in ``metadata["people"][i]["duplicates"]``). A track on which no pose is
 found in any frame is left out (``metadata["people_without_pose"]``). Person 0 (the main person) is the most prominent
 track with a pose; track ids number the tracks by prominence. Another estimator plugs in through
 :class:`PersonPoseEstimator` (two methods); MediaPipe is :class:`MediaPipeCrops`.
@@ -28,11 +32,11 @@ from ..core.cameras import inside_image
 from ..core.people import Person
 from ..data.readers.pose_file import PoseEstimates
 from .people_track import select_people, track_people
-from .pose_duplicates import duplicate_frames
+from .pose_duplicates import duplicate_detections, duplicate_frames
 from .tracking import body_box
 
 __all__ = ["estimate_people", "detection_keypoints", "pose_in_box", "PersonPoseEstimator", "MediaPipeCrops",
-           "mask_frames"]
+           "mask_frames", "bridged_frames"]
 
 
 def pose_in_box(keypoints: torch.Tensor, conf: torch.Tensor, boxes: torch.Tensor,
@@ -126,6 +130,13 @@ class MediaPipeCrops:
         return self.assemble(raw["landmarks"], conf, raw["world"], raw["found"] & keep)
 
 
+def bridged_frames(boxes: torch.Tensor, detections: list[torch.Tensor]) -> torch.Tensor:
+    """(T,) bool: the frames where a track's box (``boxes`` (T, 5), score 0: absent) is none of
+    that frame's ``detections`` (N_t, 5): the tracker's guess across a gap."""
+    return torch.tensor([bool(box[4] > 0) and not bool((dets == box).all(-1).any())
+                         for box, dets in zip(boxes, detections)], dtype=torch.bool)  # fmt: skip
+
+
 def _one_person(estimator: PersonPoseEstimator, frames: torch.Tensor, boxes: torch.Tensor) -> tuple[PoseEstimates, int]:
     """The estimates of the person in ``boxes`` (T, 5), and how many crops showed someone else."""
     est = estimator.estimate_person(frames, boxes)
@@ -166,10 +177,13 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
     found, the confidences are 0 everywhere (and the most prominent track's boxes are kept, if any)."""
     detections = [torch.as_tensor(d, dtype=torch.float32).reshape(-1, 5) for d in detector.detect_frames(frames)]
     keypoints = detection_keypoints(estimator, frames, detections)
+    doubled = duplicate_detections(detections, keypoints)  # a box around two people beside one of theirs
+    detections = [d[~drop] for d, drop in zip(detections, doubled)]
+    keypoints = [k[~drop] for k, drop in zip(keypoints, doubled)]
     tracks = select_people(track_people(detections, keypoints=keypoints), people)
     found = [_one_person(estimator, frames, boxes) for boxes in tracks]
     duplicates = duplicate_frames([est.keypoints2d for est, _ in found], [est.keypoints_conf for est, _ in found],
-                                  list(tracks))  # fmt: skip
+                                  list(tracks), [bridged_frames(boxes, detections) for boxes in tracks])  # fmt: skip
     estimates, records = [], []
     for track_id, (boxes, (est, not_theirs), twice) in enumerate(zip(tracks, found, duplicates)):
         est = estimator.keep_frames(est, ~twice) if bool(twice.any()) else est
@@ -179,6 +193,7 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
                         "duplicates": int(twice.sum())})  # fmt: skip
     with_pose = [est for est in estimates if bool(est.found().any())]
     meta = {**(meta or {}), "people": records, "people_asked": people, "tracks": len(tracks),
+            "duplicate_detections": int(sum(int(d.sum()) for d in doubled)),
             "people_without_pose": [r["track_id"] for r in records if not r["pose_frames"]]}  # fmt: skip
     if not with_pose:
         nobody = estimator.estimate_person(frames, torch.zeros(frames.shape[0], 5))

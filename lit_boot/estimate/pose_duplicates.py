@@ -6,7 +6,10 @@ ids, that person's motion would also be taught as the other's. :func:`duplicate_
 in every frame, the pairs of people whose poses coincide (the median distance of the joints
 confident in both, at least :data:`MIN_JOINTS`, below :data:`MAX_DISTANCE` x the pose's size)
 and gives the pose to the person whose box fits it best (the IoU of the box with the extent of
-the pose's confident keypoints): the other person has no pose in that frame. Keypoints are px;
+the pose's confident keypoints), or, where one box is a detection and the other the tracker's
+guess across a gap, to the detection's: the other person has no pose in that frame.
+:func:`duplicate_detections` does the same among one frame's detections before tracking, so that
+a box around two people does not start a second track on the one it shares a pose with. Keypoints are px;
 boxes x0, y0, x1, y1 px with pixel centres at integer coordinates (:mod:`.detector`).
 """
 
@@ -18,7 +21,7 @@ import torch
 
 from .track_cost import iou_matrix
 
-__all__ = ["duplicate_frames", "MAX_DISTANCE", "MIN_JOINTS"]
+__all__ = ["duplicate_frames", "duplicate_detections", "MAX_DISTANCE", "MIN_JOINTS"]
 
 #: Two poses are one where their shared joints' median distance is below this share of the pose's
 #: size (the larger side of its confident keypoints' extent).
@@ -35,11 +38,18 @@ def _extent(keypoints: torch.Tensor, confident: torch.Tensor) -> torch.Tensor:
     return torch.cat([points.amin(0), points.amax(0)])
 
 
-def duplicate_frames(keypoints: Sequence[torch.Tensor], confidence: Sequence[torch.Tensor],
-                     boxes: Sequence[torch.Tensor]) -> list[torch.Tensor]:  # fmt: skip
+def duplicate_frames(
+    keypoints: Sequence[torch.Tensor],
+    confidence: Sequence[torch.Tensor],
+    boxes: Sequence[torch.Tensor],
+    bridged: Sequence[torch.Tensor] | None = None,
+) -> list[torch.Tensor]:
     """For P people, each one's keypoints (T, K, 2) px, confidences (T, K) (0: not found) and
     boxes (T, 5): per person a (T,) bool of the frames where its pose is another person's too and
-    that person's box fits it better (ties: the earlier person keeps it)."""
+    that person's box fits it better (ties: the earlier person keeps it). With ``bridged`` (per
+    person a (T,) bool: frames whose box is the tracker's guess across a gap, not a detection), a
+    detection's box is preferred to a bridged one whatever their fit: a crop where nobody was
+    detected shows whoever stands there, often the person in front."""
     P = len(keypoints)
     drop = [torch.zeros(c.shape[0], dtype=torch.bool) for c in confidence]
     for t in range(drop[0].shape[0] if P else 0):
@@ -56,5 +66,21 @@ def duplicate_frames(keypoints: Sequence[torch.Tensor], confidence: Sequence[tor
                     continue
                 fit_a, fit_b = (float(iou_matrix(extent[None], boxes[p][t, None, :4])[0, 0])
                                 for p, extent in ((a, pose), (b, _extent(keypoints[b][t], confident[b]))))  # fmt: skip
+                if bridged is not None and bool(bridged[a][t]) != bool(bridged[b][t]):
+                    fit_a, fit_b = float(not bridged[a][t]), float(not bridged[b][t])
                 drop[b if fit_a >= fit_b else a][t] = True
     return drop
+
+
+def duplicate_detections(detections: Sequence[torch.Tensor], keypoints: Sequence[torch.Tensor]) -> list[torch.Tensor]:
+    """Per frame, the detections (N_t, 5) whose pose (their keypoints (N_t, K, 3): x, y px,
+    confidence) is another detection's too and fits that one's box better (:func:`duplicate_frames`
+    within the frame): a box around two people beside a box of one of them, which would otherwise
+    start a second track on that person. Returns per frame a (N_t,) bool."""
+    out = []
+    for dets, kps in zip(detections, keypoints):
+        one = [kps[i : i + 1] for i in range(dets.shape[0])]
+        drop = duplicate_frames([k[..., :2] for k in one], [k[..., 2] for k in one],
+                                [dets[i : i + 1] for i in range(dets.shape[0])])  # fmt: skip
+        out.append(torch.cat(drop) if drop else torch.zeros(0, dtype=torch.bool))
+    return out
