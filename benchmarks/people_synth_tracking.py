@@ -4,14 +4,17 @@ against the true identities (issue 25's "zero identity switches" bar).
 Each person's true box per frame (its visible keypoints' extent, ``Scene.people()[p].person_boxes``)
 becomes a detection with the edges jittered by ``--jitter`` of the box's larger side, missed with
 probability ``--miss``, and each frame's detections shuffled; :func:`lit_boot.estimate.track_people`
-links them. Per true person: the frames it is visible in, the share of them a track covers, and
-its identity switches (the covering track changes between two covered frames, the MOT
+links them (``--min-visible K``: a person is detected only where at least K of its 17 keypoints
+are seen, as a real detector needs more than a sliver; `benchmarks/people_synth_detectability.py`
+measures YOLOX-Nano's rate per count). Per true person: the frames it is visible in, the share of
+them a track covers, and its identity switches (the covering track changes between two covered frames, the MOT
 definition). Scenes: make_scene(people=N, frames=--frames, 128x256), seeds and motions below;
 the other people walk across, crossing and occluding person 0.
 
 Usage: python benchmarks/people_synth_tracking.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--jitter 0.05] [--miss 0.1] [--smoothing 0.5] [--keypoints]
-           [--pose-miss 0.3] [--keypoint-weight 1] [--no-stitch] [--beam 1] [--json out.json] [--grid]
+           [--pose-miss 0.3] [--keypoint-weight 1] [--no-stitch] [--beam 1] [--min-visible 8]
+           [--json out.json] [--grid]
 
 ``--grid`` prints one line instead of the table: the identity switches summed over the people of
 the scenes, "noisy" (5% jitter, 10% missed), "exact" (none) and "harder" (10%/20%, 5%/20% and
@@ -26,6 +29,7 @@ import json
 from pathlib import Path
 
 import torch
+import torch.nn.functional as F
 
 from lit_boot.estimate import track_people
 from lit_boot.synth import make_scene
@@ -33,11 +37,31 @@ from lit_boot.synth import make_scene
 MOTIONS = ("walk", "run", "wave")
 
 
-def detections_of(scene, jitter: float, miss: float,
-                  g: torch.Generator) -> tuple[list[torch.Tensor], list[list[int]], list[torch.Tensor]]:  # fmt: skip
+def visible_keypoints(scene) -> torch.Tensor:
+    """(P, T) how many of each true person's COCO-17 keypoints are seen: inside the frame, with a
+    pixel of that person's own rendered mask within 1 px of the keypoint (the 3x3 around it)."""
+    truths = scene.gt.truths([p.track_id for p in scene.people()])
+    out = torch.zeros(len(truths), scene.num_frames, dtype=torch.long)
+    for p, truth in enumerate(truths):
+        near = F.max_pool2d(truth.person_mask.float()[:, None], 3, 1, 1)[:, 0] > 0  # (T, H, W)
+        T, H, W = near.shape
+        px = truth.keypoints2d.round().long()
+        inside = (px[..., 0] >= 0) & (px[..., 0] < W) & (px[..., 1] >= 0) & (px[..., 1] < H)
+        x, y = px[..., 0].clamp(0, W - 1), px[..., 1].clamp(0, H - 1)
+        seen = near[torch.arange(T)[:, None], y, x] & inside
+        out[p] = seen.sum(-1)
+    return out
+
+
+def detections_of(scene, jitter: float, miss: float, g: torch.Generator,
+                  min_visible: int = 1) -> tuple[list[torch.Tensor], list[list[int]], list[torch.Tensor]]:  # fmt: skip
     """Each frame's noisy, shuffled detections (N_t, 5), the true person of each, and each one's
-    keypoints (N_t, K, 3): the person's simulated 2D estimates (x, y px, confidence)."""
+    keypoints (N_t, K, 3): the person's simulated 2D estimates (x, y px, confidence). With
+    ``min_visible`` > 1, a person is detected only where at least that many of its keypoints are
+    seen (:func:`visible_keypoints`; 1: wherever its box is, any keypoint seen)."""
     boxes = torch.stack([p.person_boxes for p in scene.people()])  # (P, T, 5)
+    # the random draws as with every box: the same misses and jitter for the boxes that stay
+    seen = visible_keypoints(scene) >= min_visible if min_visible > 1 else torch.ones(boxes.shape[:2], dtype=bool)
     poses = torch.stack([torch.cat([p.keypoints2d, p.keypoints_conf[..., None]], -1) for p in scene.people()])
     dets, who, kps = [], [], []
     for t in range(boxes.shape[1]):
@@ -51,8 +75,8 @@ def detections_of(scene, jitter: float, miss: float,
             rows.append(torch.cat([torch.minimum(noisy[:2], noisy[2:]), torch.maximum(noisy[:2], noisy[2:]),
                                    torch.tensor([0.9])]))  # fmt: skip
             owners.append(p)
-        order = torch.randperm(len(rows), generator=g).tolist()
-        dets.append(torch.stack([rows[i] for i in order]) if rows else torch.zeros(0, 5))
+        order = [i for i in torch.randperm(len(rows), generator=g).tolist() if seen[owners[i], t]]
+        dets.append(torch.stack([rows[i] for i in order]) if order else torch.zeros(0, 5))
         who.append([owners[i] for i in order])
         kps.append(poses[[owners[i] for i in order], t].reshape(len(order), poses.shape[2], 3))
     return dets, who, kps
@@ -73,8 +97,9 @@ def score(tracks: torch.Tensor, dets: list[torch.Tensor], who: list[list[int]], 
     for p in range(P):
         seen = [k for k in covering[p] if k is not None]
         switches = sum(a != b for a, b in zip(seen, seen[1:]))
-        rows.append({"person": p, "visible": int(visible[p].sum()), "covered": round(len(seen) / max(int(visible[p].sum()), 1), 3),
-                     "switches": switches})  # fmt: skip
+        shown = int(visible[p].sum())
+        covered = round(len(seen) / max(shown, 1), 3)
+        rows.append({"person": p, "visible": shown, "covered": covered, "switches": switches})
     return rows
 
 
@@ -89,7 +114,7 @@ def switches(args: argparse.Namespace, jitter: float, miss: float, pose_miss: fl
             scene = make_scene(frames=args.frames, height=128, width=256, motion=MOTIONS[i % len(MOTIONS)], seed=seed,
                                people=n)  # fmt: skip
             g = torch.Generator().manual_seed(seed)
-            dets, who, kps = detections_of(scene, jitter, miss, g)
+            dets, who, kps = detections_of(scene, jitter, miss, g, args.min_visible)
             kps = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= pose_miss) for k in kps]
             options = {"smoothing": args.smoothing, "keypoint_weight": args.keypoint_weight, "beam": args.beam}
             tracks = track_people(dets, keypoints=kps if args.keypoints else None, stitch=not args.no_stitch,
@@ -129,6 +154,8 @@ def main() -> None:
     parser.add_argument("--keypoint-weight", type=float, default=None, help="track_people's keypoint_weight")
     parser.add_argument("--no-stitch", action="store_true", help="track_people(stitch=False)")
     parser.add_argument("--beam", type=int, default=None, help="track_people's beam (1: frame by frame)")
+    parser.add_argument("--min-visible", type=int, default=1,
+                        help="detect a person only where this many of its keypoints are seen (1: any)")
     parser.add_argument("--json", default=None)
     parser.add_argument("--grid", action="store_true", help="the switches over the grid of conditions, one line")
     args = parser.parse_args()
