@@ -294,3 +294,21 @@ def test_duplicate_detections_and_bridged_frames():
     assert [d.tolist() for d in drop] == [[True, False, False], [False, False], []]  # no pose: no duplicate
     boxes = torch.tensor([tight, [90.0, 20.0, 120.0, 100.0, 0.6], [0.0] * 5])
     assert bridged_frames(boxes, dets).tolist() == [False, True, False]
+
+
+def test_keep_frames_refits_any_estimates_the_crops_made():
+    """Dropping frames twice (a neighbour's pose, then a pose another track has too) refits the
+    estimates from the landmarks both times: the dropped frames are missing and filled from the
+    person's own frames, not kept with another person's pose in 3D."""
+    frames, detector = two_people()
+    boxes = detector.detect_frames(frames)
+    a = torch.stack([d[0] for d in boxes])
+    estimator = crops(frames)
+    est = estimator.estimate_person(frames, a)
+    once = estimator.keep_frames(est, torch.tensor([True, False, True, True]))
+    twice = estimator.keep_frames(once, torch.tensor([True, True, False, True]))
+    assert once.metadata["missing_frames"] == [1] and twice.metadata["missing_frames"] == [1, 2]
+    assert [f for f, _ in twice.metadata["filled_from"]] == [1, 2] and (twice.keypoints_conf[1:3] == 0).all()
+    other = crops(frames).estimate_person(frames, a)  # made by another estimator: masked, nothing to refit
+    masked = estimator.keep_frames(other, torch.tensor([True, False, True, True]))
+    assert (masked.keypoints_conf[1] == 0).all() and masked.metadata["missing_frames"] == []

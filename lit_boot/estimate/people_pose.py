@@ -83,12 +83,14 @@ class MediaPipeCrops:
     ``assemble(landmarks, confidence, world, found)`` from MediaPipe-33 arrays
     (:func:`~.mediapipe_pose.poses_from_landmarks` with the run's options); ``keep_frames`` makes
     them again from the same landmarks (the 3D fill-in and the cameras then ignore the dropped
-    frames). MediaPipe runs once per crop: a box already seen in that frame (of the same frames)
-    reuses its landmarks."""
+    frames), for any estimates it made of the same frames, its own ``keep_frames``' too.
+    MediaPipe runs once per crop: a box already seen in that frame (of the same frames) reuses
+    its landmarks."""
 
     def __init__(self, pose: Any, assemble: Any):
         self.pose, self.assemble = pose, assemble
-        self._raw: tuple[PoseEstimates, dict[str, torch.Tensor], torch.Tensor] | None = None
+        # every estimates made of the current frames, with the landmarks, confidences and found frames behind it
+        self._made: list[tuple[PoseEstimates, dict[str, torch.Tensor], torch.Tensor, torch.Tensor]] = []
         self._frames: torch.Tensor | None = None
         self._seen: dict[tuple[int, tuple[float, ...]], dict[str, torch.Tensor]] = {}
 
@@ -97,7 +99,7 @@ class MediaPipeCrops:
         from .crop_pose import crop_landmarks
 
         if frames is not self._frames:
-            self._frames, self._seen = frames, {}
+            self._frames, self._seen, self._made = frames, {}, []
         keys = [(t, tuple(boxes[t, :4].tolist())) for t in range(boxes.shape[0])]
         todo = boxes[:, 4] > 0
         new = todo & torch.tensor([k not in self._seen for k in keys], dtype=torch.bool)
@@ -120,14 +122,17 @@ class MediaPipeCrops:
         raw = self._crops(frames, boxes)
         conf = landmark_confidence(raw["visibility"], raw["presence"])
         est = self.assemble(raw["landmarks"], conf, raw["world"], raw["found"])
-        self._raw = (est, raw, conf)
+        self._made.append((est, raw, conf, raw["found"]))
         return est
 
     def keep_frames(self, estimates: PoseEstimates, keep: torch.Tensor) -> PoseEstimates:
-        if self._raw is None or self._raw[0] is not estimates:
+        made = next((m for m in self._made if m[0] is estimates), None)
+        if made is None:  # not made here: nothing to refit
             return mask_frames(estimates, keep)
-        _, raw, conf = self._raw
-        return self.assemble(raw["landmarks"], conf, raw["world"], raw["found"] & keep)
+        _, raw, conf, found = made
+        est = self.assemble(raw["landmarks"], conf, raw["world"], found & keep)
+        self._made.append((est, raw, conf, found & keep))
+        return est
 
 
 def bridged_frames(boxes: torch.Tensor, detections: list[torch.Tensor]) -> torch.Tensor:
