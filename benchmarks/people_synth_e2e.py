@@ -21,11 +21,12 @@ in --seeds, as benchmarks/people_synth_tracking.py).
 Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_e2e.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--height 256] [--width 512] [--min-iou 0.3] [--min-pixels 50]
            [--detector ../shared/checkpoints/yolox_nano.onnx] [--det-score 0.25] [--det-iou 0.45]
-           [--on-jump keep] [--max-jump 0.5]
+           [--on-jump keep] [--max-jump 0.5] [--why]
            [--json out.json]
 
 The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, the
-returned people that cover nobody, and the frames with a pose on a true person and those poses' switches.
+returned people that cover nobody, and the frames with a pose on a true person and those poses' switches,
+by kind (:func:`switch_kinds`; ``--why`` prints each one).
 """
 
 from __future__ import annotations
@@ -92,10 +93,10 @@ def score(found: torch.Tensor, truth: torch.Tensor, min_iou: float) -> tuple[lis
     return rows, found.shape[0] - len(used)
 
 
-def pose_switches(people: list, truths: list, visible: torch.Tensor, max_dist: float) -> list[dict]:
-    """Per true person: the frames a returned person's pose lies on it, and that pose's identity
-    switches. A pose (``people``: PoseEstimates, coco17) lies on a true person (``truths``: each
-    one's keypoints2d (T, 17, 2)) where the median distance of its confident joints (> 0.3, at least
+def pose_owners(people: list, truths: list, visible: torch.Tensor, max_dist: float) -> list[list[int | None]]:
+    """Per true person and frame, the returned person whose pose lies on it (None: nobody). A pose
+    (``people``: PoseEstimates, coco17) lies on a true person (``truths``: each one's keypoints2d
+    (T, 17, 2)) where the median distance of its confident joints (> 0.3, at least
     4) from the true ones is below ``max_dist`` x the true keypoints' larger extent (an optimal
     assignment per frame, among the people visible (P, T))."""
     P, T = visible.shape
@@ -117,10 +118,40 @@ def pose_switches(people: list, truths: list, visible: torch.Tensor, max_dist: f
         for r, c in zip(rows, cols):
             if cost[r, c] < max_dist:
                 covering[here_p[c]][t] = r
+    return covering
+
+
+def pose_switches(covering: list[list[int | None]]) -> list[dict]:
+    """Per true person (``covering``: :func:`pose_owners`), the frames a returned person's pose lies
+    on it and that pose's identity switches."""
     out = []
-    for p in range(P):
-        seen = [q for q in covering[p] if q is not None]
+    for owners in covering:
+        seen = [q for q in owners if q is not None]
         out.append({"pose_frames": len(seen), "pose_switches": sum(a != b for a, b in zip(seen, seen[1:]))})
+    return out
+
+
+def switch_kinds(covering: list[list[int | None]]) -> list[tuple[int, int, int, str]]:
+    """Each switch of the poses (``covering``: :func:`pose_owners`) as (true person, frame before,
+    frame after, kind): "new after a gap" / "new, next frame" (the old track has no pose on anyone
+    after, the new one none before: the person found again as a new track, after frames without
+    a pose or in the very next one), "new takes over" (a new track, the old one goes on with someone
+    else), "between tracks" (the new track had a pose on someone before)."""
+    out = []
+    for p, owners in enumerate(covering):
+        seen = [(t, q) for t, q in enumerate(owners) if q is not None]
+        for (t0, a), (t1, b) in zip(seen, seen[1:]):
+            if a == b:
+                continue
+            b_before = any(owners_[t] == b for owners_ in covering for t in range(t1))
+            a_after = any(owners_[t] == a for owners_ in covering for t in range(t0 + 1, len(owners)))
+            if b_before:
+                kind = "between tracks"
+            elif a_after:
+                kind = "new takes over"
+            else:
+                kind = "new, next frame" if t1 == t0 + 1 else "new after a gap"
+            out.append((p, t0, t1, kind))
     return out
 
 
@@ -137,13 +168,14 @@ def main() -> None:
     parser.add_argument("--max-jump", type=float, default=0.5, help="estimate_poses' max_jump")
     parser.add_argument("--det-score", type=float, default=0.25, help="PersonDetector's score threshold")
     parser.add_argument("--det-iou", type=float, default=0.45, help="PersonDetector's NMS IoU threshold")
+    parser.add_argument("--why", action="store_true", help="print each switch of the poses and its kind")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     detector = PersonDetector(args.detector, score=args.det_score, iou=args.det_iou)
     print("| scene | true person: visible frames, covered, identity switches (pose: frames, switches) "
           "| people returned (false) | s |")  # fmt: skip
     print("| --- | --- | --- | --- |")
-    out, total, clear, covered, false_total, poses, pose_frames = [], 0, 0, [], 0, 0, 0
+    out, total, clear, covered, false_total, poses, pose_frames, kinds = [], 0, 0, [], 0, 0, 0, {}
     for n in (int(v) for v in args.people.split(",")):
         for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
             scene = make_scene(frames=args.frames, height=args.height, width=args.width, seed=seed, people=n,
@@ -157,8 +189,13 @@ def main() -> None:
             truth = visible_boxes(scene, args.min_pixels)
             rows, false = score(found, truth, args.min_iou)
             truths = scene.gt.truths([p.track_id for p in scene.people()])
-            for row, on_pose in zip(rows, pose_switches(posed, truths, truth[..., 4] > 0, args.max_pose_dist)):
+            owners = pose_owners(posed, truths, truth[..., 4] > 0, args.max_pose_dist)
+            for row, on_pose in zip(rows, pose_switches(owners)):
                 row.update(on_pose)
+            for p, t0, t1, kind in switch_kinds(owners):
+                kinds[kind] = kinds.get(kind, 0) + 1
+                if args.why:
+                    print(f"  {n} people, s{seed}, true person {p}: frames {t0} -> {t1}, {kind}")
             poses += sum(r["pose_switches"] for r in rows)
             pose_frames += sum(r["pose_frames"] for r in rows)
             total += sum(r["switches"] for r in rows)
@@ -171,7 +208,8 @@ def main() -> None:
             out.append({"people": n, "seed": seed, "returned": int(found.shape[0]), "false": false, "rows": rows,
                         "seconds": seconds})  # fmt: skip
     print(f"identity switches {total} ({clear} over clear frames), covered {sum(covered) / max(len(covered), 1):.0%}, "
-          f"false people {false_total}; poses on a true person {pose_frames} frames, their switches {poses}")
+          f"false people {false_total}; poses on a true person {pose_frames} frames, their switches {poses} "
+          f"({', '.join(f'{k} {v}' for k, v in sorted(kinds.items()))})")
     if args.json:
         Path(args.json).write_text(json.dumps({"settings": vars(args), "scenes": out}, indent=1))
 
