@@ -8,10 +8,18 @@ the detector's boxes is matched to it (an optimal assignment of the frame's boxe
 people's visible boxes, the extent of their seen pixels, IoU >= --min-iou); its keypoints seen are
 `people_synth_tracking.visible_keypoints` (inside the frame, its own pixels within 1 px).
 
+With ``--poses`` also the product's poses (``estimate_poses(frames, people="all", detector=...)``,
+YOLOX boxes, MediaPipe on each box's crop, tracked): of the person-frames the detector found, those
+where a returned pose lies on the person (`people_synth_e2e.pose_owners`, its median joint within
+15% of the person's size): how often the pose estimator misses a person it was given, by occlusion
+(the rate that `people_synth_tracking.py --pose-miss` draws at random).
+
 Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_detectability.py [--people 2,3] [--seeds 30,31,32,33]
            [--height 256] [--width 512] [--min-iou 0.3] [--detector ../shared/checkpoints/yolox_nano.onnx]
+           [--poses]
 
-Prints one row per count of keypoints seen (0..17): person-frames, found, rate.
+Prints one row per count of keypoints seen (0..17): person-frames, found, rate (and with --poses,
+the found ones with a pose on them, and their share).
 """
 
 from __future__ import annotations
@@ -19,10 +27,10 @@ from __future__ import annotations
 import torch
 from scipy.optimize import linear_sum_assignment
 
-from lit_boot.estimate import PersonDetector
+from lit_boot.estimate import PersonDetector, estimate_poses
 from lit_boot.estimate.track_cost import iou_matrix
 from lit_boot.synth import make_scene
-from people_synth_e2e import visible_boxes
+from people_synth_e2e import pose_owners, visible_boxes
 from people_synth_tracking import MOTIONS, scene_parser, visible_keypoints
 from real_data import SHARED
 
@@ -44,24 +52,40 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=512)
     parser.add_argument("--min-iou", type=float, default=0.3)
     parser.add_argument("--detector", default=str(SHARED / "checkpoints" / "yolox_nano.onnx"))
+    parser.add_argument("--poses", action="store_true", help="also the found people with a pose on them")
     args = parser.parse_args()
     detector = PersonDetector(args.detector)
-    total, hits = torch.zeros(18, dtype=torch.long), torch.zeros(18, dtype=torch.long)
+    total, hits, posed = (torch.zeros(18, dtype=torch.long) for _ in range(3))
     for n in (int(v) for v in args.people.split(",")):
         for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
             scene = make_scene(frames=args.frames, height=args.height, width=args.width, seed=seed, people=n,
                                motion=MOTIONS[i % len(MOTIONS)])  # fmt: skip
             truth, seen = visible_boxes(scene, 1), visible_keypoints(scene)
+            owners = _pose_owners(scene, detector, truth) if args.poses else None
             for t, detections in enumerate(detector.detect_frames(scene.frames)):
                 found = found_people(detections, truth[:, t], args.min_iou)
                 for p in range(n):
                     total[seen[p, t]] += 1
                     hits[seen[p, t]] += p in found
-    print("| keypoints seen | person-frames | found by the detector | rate |")
-    print("| --- | --- | --- | --- |")
+                    posed[seen[p, t]] += p in found and owners is not None and owners[p][t] is not None
+    extra = " found with a pose on them | share |" if args.poses else ""
+    print(f"| keypoints seen | person-frames | found by the detector | rate |{extra}")
+    print("| --- | --- | --- | --- |" + (" --- | --- |" if args.poses else ""))
     for k in range(18):
         if total[k]:
-            print(f"| {k} | {int(total[k])} | {int(hits[k])} | {float(hits[k]) / float(total[k]):.0%} |")
+            row = f"| {k} | {int(total[k])} | {int(hits[k])} | {float(hits[k]) / float(total[k]):.0%} |"
+            if args.poses:
+                row += f" {int(posed[k])} | {float(posed[k]) / max(float(hits[k]), 1.0):.0%} |"
+            print(row)
+
+
+def _pose_owners(scene, detector: PersonDetector, truth: torch.Tensor) -> list[list[int | None]]:
+    """Per true person and frame, the returned person whose pose lies on it (None: nobody), from
+    ``estimate_poses(people="all")`` on the scene's frames."""
+    every = estimate_poses(scene.frames, people="all", detector=detector)
+    people = [p for p in every.people() if p.keypoints_conf.amax() > 0]
+    truths = scene.gt.truths([p.track_id for p in scene.people()])
+    return pose_owners(people, truths, truth[..., 4] > 0, 0.15)
 
 
 if __name__ == "__main__":
