@@ -27,11 +27,11 @@ from __future__ import annotations
 import torch
 from scipy.optimize import linear_sum_assignment
 
-from lit_boot.estimate import PersonDetector, estimate_poses
+from lit_boot.estimate import PersonDetector
 from lit_boot.estimate.track_cost import iou_matrix
 from lit_boot.synth import make_scene
-from people_synth_e2e import pose_owners, visible_boxes
-from people_synth_tracking import MOTIONS, scene_parser, visible_keypoints
+from people_synth_e2e import pose_owners, returned_people, visible_boxes
+from people_synth_tracking import MOTIONS, scene_parser, true_people, visible_keypoints
 from real_data import SHARED
 
 
@@ -82,10 +82,7 @@ def main() -> None:
 def _pose_owners(scene, detector: PersonDetector, truth: torch.Tensor) -> list[list[int | None]]:
     """Per true person and frame, the returned person whose pose lies on it (None: nobody), from
     ``estimate_poses(people="all")`` on the scene's frames."""
-    every = estimate_poses(scene.frames, people="all", detector=detector)
-    people = [p for p in every.people() if p.keypoints_conf.amax() > 0]
-    truths = scene.gt.truths([p.track_id for p in scene.people()])
-    return pose_owners(people, truths, truth[..., 4] > 0, 0.15)
+    return pose_owners(returned_people(scene, detector), true_people(scene), truth[..., 4] > 0, 0.15)
 
 
 if __name__ == "__main__":

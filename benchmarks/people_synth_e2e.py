@@ -41,15 +41,22 @@ from scipy.optimize import linear_sum_assignment
 from lit_boot.estimate import PersonDetector, estimate_poses
 from lit_boot.estimate.track_cost import iou_matrix
 from lit_boot.synth import make_scene
-from people_synth_tracking import MOTIONS, scene_parser
+from people_synth_tracking import MOTIONS, scene_parser, true_people
 from real_data import SHARED
+
+
+def returned_people(scene, detector: PersonDetector, **options) -> list:
+    """The people ``estimate_poses(scene.frames, people="all", detector=detector, **options)``
+    returns with a pose in some frame (Person, each with its boxes), as a user's run gives them."""
+    every = estimate_poses(scene.frames, people="all", detector=detector, **options)
+    return [p for p in every.people() if p.person_boxes is not None and p.keypoints_conf.amax() > 0]
 
 
 def visible_boxes(scene, min_pixels: int) -> torch.Tensor:
     """(P, T, 5) each true person's visible box (x0, y0, x1, y1 px: the edges of its seen pixels, pixel
     centres at integer coordinates, as the detector's boxes) and 1 where at least
     ``min_pixels`` of it are seen, in ``scene.people()`` order."""
-    truths = scene.gt.truths([p.track_id for p in scene.people()])
+    truths = true_people(scene)
     out = torch.zeros(len(truths), scene.num_frames, 5)
     for p, truth in enumerate(truths):
         for t, mask in enumerate(truth.person_mask):
@@ -181,15 +188,12 @@ def main() -> None:
             scene = make_scene(frames=args.frames, height=args.height, width=args.width, seed=seed, people=n,
                                motion=MOTIONS[i % len(MOTIONS)])  # fmt: skip
             start = time.perf_counter()
-            every = estimate_poses(scene.frames, people="all", detector=detector, on_jump=args.on_jump,
-                                   max_jump=args.max_jump)  # fmt: skip
+            posed = returned_people(scene, detector, on_jump=args.on_jump, max_jump=args.max_jump)
             seconds = time.perf_counter() - start
-            posed = [p for p in every.people() if p.person_boxes is not None and p.keypoints_conf.amax() > 0]
             found = torch.stack([p.person_boxes for p in posed]) if posed else torch.zeros(0, args.frames, 5)
             truth = visible_boxes(scene, args.min_pixels)
             rows, false = score(found, truth, args.min_iou)
-            truths = scene.gt.truths([p.track_id for p in scene.people()])
-            owners = pose_owners(posed, truths, truth[..., 4] > 0, args.max_pose_dist)
+            owners = pose_owners(posed, true_people(scene), truth[..., 4] > 0, args.max_pose_dist)
             for row, on_pose in zip(rows, pose_switches(owners)):
                 row.update(on_pose)
             for p, t0, t1, kind in switch_kinds(owners):

@@ -37,10 +37,15 @@ from lit_boot.synth import make_scene
 MOTIONS = ("walk", "run", "wave")
 
 
+def true_people(scene) -> list:
+    """The scene's true people (PersonTruth), in ``scene.people()`` order."""
+    return scene.gt.truths([p.track_id for p in scene.people()])
+
+
 def visible_keypoints(scene) -> torch.Tensor:
     """(P, T) how many of each true person's COCO-17 keypoints are seen: inside the frame, with a
     pixel of that person's own rendered mask within 1 px of the keypoint (the 3x3 around it)."""
-    truths = scene.gt.truths([p.track_id for p in scene.people()])
+    truths = true_people(scene)
     out = torch.zeros(len(truths), scene.num_frames, dtype=torch.long)
     for p, truth in enumerate(truths):
         near = F.max_pool2d(truth.person_mask.float()[:, None], 3, 1, 1)[:, 0] > 0  # (T, H, W)
