@@ -13,13 +13,16 @@ the other people walk across, crossing and occluding person 0.
 
 Usage: python benchmarks/people_synth_tracking.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--jitter 0.05] [--miss 0.1] [--smoothing 0.5] [--keypoints]
-           [--pose-miss 0.3] [--keypoint-weight 1] [--no-stitch] [--beam 1] [--min-visible 8]
-           [--json out.json] [--grid]
+           [--pose-miss 0.3|seen] [--keypoint-weight 1] [--no-stitch] [--beam 1] [--min-visible 8]
+           [--json out.json] [--grid [--seen-poses]]
 
 ``--grid`` prints one line instead of the table: the identity switches summed over the people of
 the scenes, "noisy" (5% jitter, 10% missed), "exact" (none) and "harder" (10%/20%, 5%/20% and
 10%/10%, summed) at pose-miss 0, then every condition's sum at pose-miss 0 / 0.3 / 0.6 and their
 total (BENCHMARKS.md, "Keypoints in the tracker"); --jitter, --miss and --pose-miss are then unused.
+``--pose-miss seen`` misses a detection's pose as the product's own estimator does on these scenes,
+by how much of the person is seen (:data:`POSE_FOUND_BY_SEEN`), not at random; ``--grid
+--seen-poses`` prints "noisy, exact, harder; total" with the poses missed that way.
 """
 
 from __future__ import annotations
@@ -35,6 +38,11 @@ from lit_boot.estimate import track_people
 from lit_boot.synth import make_scene
 
 MOTIONS = ("walk", "run", "wave")
+#: (fewest keypoints seen, share of the detected people given a pose): MediaPipe on YOLOX-Nano's
+#: crops of the rendered scenes, `people_synth_detectability.py --poses` on seeds 30-33 and 42-49
+#: (BENCHMARKS.md, "A detector that needs more than a sliver"): none with 10 keypoints seen or
+#: fewer, a quarter with 11-16, half of the fully seen.
+POSE_FOUND_BY_SEEN = ((0, 0.0), (11, 0.26), (17, 0.50))
 
 
 def true_people(scene) -> list:
@@ -87,6 +95,16 @@ def detections_of(scene, jitter: float, miss: float, g: torch.Generator,
     return dets, who, kps
 
 
+def pose_missed(seen: list[int], pose_miss: float | str, g: torch.Generator) -> torch.Tensor:
+    """(N,) True where a detection's pose is not found: at random with probability ``pose_miss``, or,
+    with ``"seen"``, by how many keypoints of its person are ``seen`` (:data:`POSE_FOUND_BY_SEEN`)."""
+    draw = torch.rand(len(seen), generator=g)
+    if pose_miss != "seen":
+        return draw < float(pose_miss)
+    found = torch.tensor([[rate for least, rate in POSE_FOUND_BY_SEEN if n >= least][-1] for n in seen])
+    return draw >= found.reshape(-1)
+
+
 def score(tracks: torch.Tensor, dets: list[torch.Tensor], who: list[list[int]], visible: torch.Tensor) -> list[dict]:
     """Per true person: visible frames, covered share, identity switches."""
     P, T = visible.shape
@@ -111,7 +129,7 @@ def score(tracks: torch.Tensor, dets: list[torch.Tensor], who: list[list[int]], 
 GRID = {"noisy": [(0.05, 0.1)], "exact": [(0.0, 0.0)], "harder": [(0.1, 0.2), (0.05, 0.2), (0.1, 0.1)]}
 
 
-def switches(args: argparse.Namespace, jitter: float, miss: float, pose_miss: float) -> tuple[int, list[dict]]:
+def switches(args: argparse.Namespace, jitter: float, miss: float, pose_miss: float | str) -> tuple[int, list[dict]]:
     """The identity switches summed over every scene's people, and the scenes' rows."""
     total, out = 0, []
     for n in (int(v) for v in args.people.split(",")):
@@ -120,7 +138,9 @@ def switches(args: argparse.Namespace, jitter: float, miss: float, pose_miss: fl
                                people=n)  # fmt: skip
             g = torch.Generator().manual_seed(seed)
             dets, who, kps = detections_of(scene, jitter, miss, g, args.min_visible)
-            kps = [k * (torch.rand(k.shape[0], 1, 1, generator=g) >= pose_miss) for k in kps]
+            seen = visible_keypoints(scene)
+            kps = [k * ~pose_missed([int(seen[p, t]) for p in who[t]], pose_miss, g)[:, None, None]
+                   for t, k in enumerate(kps)]  # fmt: skip
             options = {"smoothing": args.smoothing, "keypoint_weight": args.keypoint_weight, "beam": args.beam}
             tracks = track_people(dets, keypoints=kps if args.keypoints else None, stitch=not args.no_stitch,
                                   **{k: v for k, v in options.items() if v is not None})  # fmt: skip
@@ -132,6 +152,9 @@ def switches(args: argparse.Namespace, jitter: float, miss: float, pose_miss: fl
 
 
 def grid(args: argparse.Namespace) -> str:
+    if args.seen_poses:
+        cells = [sum(switches(args, j, m, "seen")[0] for j, m in runs) for runs in GRID.values()]
+        return f"{cells[0]}, {cells[1]}, {cells[2]}; {sum(cells)}"
     cells = {(pm, name): sum(switches(args, j, m, pm)[0] for j, m in runs)
              for pm in (0.0, 0.3, 0.6) for name, runs in GRID.items()}  # fmt: skip
     per_miss = [sum(cells[(pm, name)] for name in GRID) for pm in (0.0, 0.3, 0.6)]
@@ -154,8 +177,9 @@ def main() -> None:
     parser.add_argument("--miss", type=float, default=0.1)
     parser.add_argument("--smoothing", type=float, default=None, help="track_people's smoothing (default: its own)")
     parser.add_argument("--keypoints", action="store_true", help="give the tracker each detection's keypoints")
-    parser.add_argument("--pose-miss", type=float, default=0.0,
-                        help="with --keypoints: the share of detections whose pose is not found (confidence 0)")
+    parser.add_argument("--pose-miss", default="0",
+                        help="with --keypoints: the share of detections whose pose is not found (confidence 0), "
+                        "or 'seen': by how much of the person is seen, as the product's estimator")
     parser.add_argument("--keypoint-weight", type=float, default=None, help="track_people's keypoint_weight")
     parser.add_argument("--no-stitch", action="store_true", help="track_people(stitch=False)")
     parser.add_argument("--beam", type=int, default=None, help="track_people's beam (1: frame by frame)")
@@ -163,6 +187,7 @@ def main() -> None:
                         help="detect a person only where this many of its keypoints are seen (1: any)")
     parser.add_argument("--json", default=None)
     parser.add_argument("--grid", action="store_true", help="the switches over the grid of conditions, one line")
+    parser.add_argument("--seen-poses", action="store_true", help="with --grid: the poses missed as --pose-miss seen")
     args = parser.parse_args()
     if args.grid:
         print(grid(args))
