@@ -26,7 +26,8 @@ Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_e2e.py [--people 2,3] [-
 
 The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, the
 returned people that cover nobody, and the frames with a pose on a true person and those poses' switches,
-by kind (:func:`switch_kinds`; ``--why`` prints each one).
+by kind (:func:`switch_kinds`; ``--why`` prints each one), and how many of those switches lie in the frames
+the product marks to check (:func:`checked`), which are so many of the returned people's frames with a pose.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from pathlib import Path
 import torch
 from scipy.optimize import linear_sum_assignment
 
-from lit_boot.estimate import PersonDetector, estimate_poses
+from lit_boot.estimate import PersonDetector, estimate_poses, frames_to_check
 from lit_boot.estimate.track_cost import iou_matrix
 from lit_boot.synth import make_scene
 from people_synth_tracking import MOTIONS, scene_parser, true_people
@@ -162,6 +163,18 @@ def switch_kinds(covering: list[list[int | None]]) -> list[tuple[int, int, int, 
     return out
 
 
+def checked(posed: list, owners: list[list[int | None]]) -> tuple[int, int, int]:
+    """The switches of the poses (:func:`switch_kinds`) inside the frames the product marks to check
+    (:func:`lit_boot.estimate.frames_to_check`: a frame from the last pose before the switch to the
+    first after it, of either track), and the frames with a pose marked, of those with a pose:
+    (switches caught, frames marked, frames with a pose)."""
+    marks = frames_to_check(posed)
+    caught = sum(bool(marks[owners[p][t0]][t0 : t1 + 1].any() or marks[owners[p][t1]][t0 : t1 + 1].any())
+                 for p, t0, t1, _ in switch_kinds(owners))  # fmt: skip
+    found = [(person.keypoints_conf > 0).any(-1) for person in posed]
+    return caught, sum(int((m & f).sum()) for m, f in zip(marks, found)), sum(int(f.sum()) for f in found)
+
+
 def main() -> None:
     parser = scene_parser(__doc__.splitlines()[0])
     parser.add_argument("--height", type=int, default=256)
@@ -183,6 +196,7 @@ def main() -> None:
           "| people returned (false) | s |")  # fmt: skip
     print("| --- | --- | --- | --- |")
     out, total, clear, covered, false_total, poses, pose_frames, kinds = [], 0, 0, [], 0, 0, 0, {}
+    marked = [0, 0, 0]  # switches caught, frames marked, frames with a pose (:func:`checked`)
     for n in (int(v) for v in args.people.split(",")):
         for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
             scene = make_scene(frames=args.frames, height=args.height, width=args.width, seed=seed, people=n,
@@ -196,6 +210,7 @@ def main() -> None:
             owners = pose_owners(posed, true_people(scene), truth[..., 4] > 0, args.max_pose_dist)
             for row, on_pose in zip(rows, pose_switches(owners)):
                 row.update(on_pose)
+            marked = [a + b for a, b in zip(marked, checked(posed, owners))]
             for p, t0, t1, kind in switch_kinds(owners):
                 kinds[kind] = kinds.get(kind, 0) + 1
                 if args.why:
@@ -213,7 +228,8 @@ def main() -> None:
                         "seconds": seconds})  # fmt: skip
     print(f"identity switches {total} ({clear} over clear frames), covered {sum(covered) / max(len(covered), 1):.0%}, "
           f"false people {false_total}; poses on a true person {pose_frames} frames, their switches {poses} "
-          f"({', '.join(f'{k} {v}' for k, v in sorted(kinds.items()))})")
+          f"({', '.join(f'{k} {v}' for k, v in sorted(kinds.items()))}); in the frames marked to check "
+          f"{marked[0]}, marked {marked[1]} of {marked[2]} frames with a pose")
     if args.json:
         Path(args.json).write_text(json.dumps({"settings": vars(args), "scenes": out}, indent=1))
 

@@ -178,6 +178,10 @@ def import_scene(argv: list[str]) -> int:
         scene = with_poses(_reader(args.kind)(**options), poses, estimate, detector, people)
     save_scene(scene, out, overwrite=overwrite)
     print(scene.summary())
+    from ..estimate import checks_line, scene_checks
+
+    if line := checks_line(scene_checks(scene)):
+        print(f"  {line}")
     print(f"wrote {out}")
     return 0
 

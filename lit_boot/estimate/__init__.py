@@ -16,7 +16,8 @@ person a pose, top-down (the main person first, the others in ``PoseEstimates.ot
 :class:`PersonPoseEstimator` (``estimate_person(frames, boxes)``, ``keep_frames(estimates,
 keep)``; MediaPipe's is :class:`MediaPipeCrops`) on every tracked person.
 ``read_tracked_estimates(path)`` reads every person of an external COCO keypoint or DCPose file,
-linked into tracks by the file's track ids or by the same tracker.
+linked into tracks by the file's track ids or by the same tracker. ``frames_to_check(people)``
+marks, per person, the frames where its id may have switched (people overlapping, or found again).
 """
 
 from .detector import (
@@ -45,6 +46,7 @@ from .mediapipe_pose import (
     run_mediapipe,
     summary_line,
 )
+from .id_checks import checks_line, frame_ranges, frames_to_check, scene_checks
 from .keypoint_tracks import link_keypoint_people, read_tracked_estimates
 from .people_pose import (
     MediaPipeCrops,
@@ -104,6 +106,10 @@ __all__ = [
     "parse_people",
     "select_people",
     "track_people",
+    "frames_to_check",
+    "frame_ranges",
+    "checks_line",
+    "scene_checks",
     "person_boxes",
     "JUMP_POLICIES",
     "drop_jumps",

@@ -35,6 +35,7 @@ import torch
 from ..core.joints import COCO17
 from ..core.scene import Scene
 from ..data.readers.pose_file import PoseEstimates, save_poses
+from .id_checks import checks_line
 from .tracking import JUMP_POLICIES, drop_jumps, find_jumps
 from .world_to_lsp import HEAD_TOP_FACTOR, fit_cameras, landmark_confidence, landmarks_to_coco17, nearest_found
 from .world_to_lsp import world_to_lsp14
@@ -353,8 +354,10 @@ def summary_line(est: PoseEstimates) -> str:
     if est.others:
         seen = ", ".join(str(int((p.keypoints_conf > 0).any(-1).sum())) for p in est.people())
         boxes += f"; {est.num_people} people (frames with a pose each: {seen})"
+    where = checks_line([(r["track_id"], r.get("check_ids", [])) for r in est.metadata.get("people", [])])
+    where = f"; {where}" if where else ""
     return (f"{T} frames, {n} with a person ({T - n} without){boxes}, mean keypoint confidence {mean:.2f} "
-            f"where found, {jumps} tracking jumps; {est.source}")  # fmt: skip
+            f"where found, {jumps} tracking jumps; {est.source}{where}")  # fmt: skip
 
 
 def estimate_pose_file(

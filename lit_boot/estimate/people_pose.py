@@ -16,9 +16,10 @@ people beside a box of one of them), is dropped (counted in ``metadata["duplicat
 after, a pose two tracks' crops both give counts for the track whose box there is a detection
 rather than the tracker's guess across a gap (:func:`bridged_frames`), else for the one whose box
 fits it best (the other's frames counted in ``metadata["people"][i]["duplicates"]``). A track on which no pose is
-found in any frame is left out (``metadata["people_without_pose"]``). Person 0 (the main person) is the most prominent
-track with a pose; track ids number the tracks by prominence. Another estimator plugs in through
-:class:`PersonPoseEstimator` (two methods); MediaPipe is :class:`MediaPipeCrops`.
+found in any frame is left out (``metadata["people_without_pose"]``). The frames where a person's id may have switched
+(:func:`~.id_checks.frames_to_check`) are listed in ``metadata["people"][i]["check_ids"]`` (video frame numbers).
+Person 0 (the main person) is the most prominent track with a pose; track ids number the tracks by prominence.
+Another estimator plugs in through :class:`PersonPoseEstimator` (two methods); MediaPipe is :class:`MediaPipeCrops`.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import torch
 from ..core.cameras import inside_image
 from ..core.people import Person
 from ..data.readers.pose_file import PoseEstimates
+from .id_checks import frames_to_check
 from .people_track import select_people, track_people
 from .pose_duplicates import duplicate_detections, duplicate_frames
 from .tracking import body_box
@@ -197,6 +199,8 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
                         "pose_frames": int(est.found().sum()), "not_theirs": not_theirs,
                         "duplicates": int(twice.sum())})  # fmt: skip
     with_pose = [est for est in estimates if bool(est.found().any())]
+    for est, check in zip(with_pose, frames_to_check([Person.of(est) for est in with_pose])):
+        records[est.track_id]["check_ids"] = est.frame_indices[check].tolist()
     meta = {**(meta or {}), "people": records, "people_asked": people, "tracks": len(tracks),
             "duplicate_detections": int(sum(int(d.sum()) for d in doubled)),
             "people_without_pose": [r["track_id"] for r in records if not r["pose_frames"]]}  # fmt: skip
