@@ -82,3 +82,20 @@ def test_scene_checks_number_the_frames_as_the_video_does():
     assert scene_checks(stepped) == [(p.track_id, [10 + 2 * t for t in r]) for p, r in zip(scene.people(), rows)]
     alone = dataclasses.replace(scene, others=())
     assert scene_checks(alone) == []
+
+
+def test_the_report_of_a_run_with_several_people_names_the_frames_to_check(tmp_path):
+    import lit_boot
+    from lit_boot.bootstrap import bootstrap
+    from lit_boot.bootstrap.html_report import REPORT_HTML
+    from lit_boot.bootstrap.verdict import ids_sentence
+    from lit_boot.estimate import checks_line, scene_checks
+
+    scene = lit_boot.make_scene(motion="walk", frames=5, height=64, width=96, seed=30, people=2)
+    line = checks_line(scene_checks(scene))
+    assert line.startswith("ids to check")  # the other person crosses the main one
+    bootstrap(scene, tmp_path / "run", flow={"weights": None, "train_updates": 2, "predict_updates": 3},
+              flow_epochs=1, pose_steps=15, progress_bar=False, video=False, accelerator="cpu")  # fmt: skip
+    html = (tmp_path / "run" / REPORT_HTML).read_text()
+    assert f"Several people: {line}." in html.replace("&#x27;", "'")
+    assert ids_sentence(scene.person(0)) is None  # one person: nothing to check

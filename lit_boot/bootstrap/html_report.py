@@ -30,7 +30,7 @@ from .guard import guard_text
 from .html_parts import colour_bar, esc, img, page, swatches, table
 from .pair_maps import DIVERGING, SEQUENTIAL, Scales, pair_maps, pair_panels, pair_stats, pick_pairs, shared_scales
 from .report import metric_rows
-from .verdict import EvidenceTally, evidence_sentence, gt_sentence
+from .verdict import EvidenceTally, evidence_sentence, gt_sentence, ids_sentence
 
 __all__ = ["write_report", "render_report", "REPORT_HTML"]
 
@@ -249,7 +249,8 @@ def render_report(run: FinishedRun, max_pairs: int = 8, panel_width: int = 320) 
         if t in shown:
             maps[t] = pair
     scales = shared_scales(run, maps)
-    verdict = [s for s in (gt_sentence(run.history), evidence_sentence(tally, run.history)) if s]
+    verdict = [s for s in (gt_sentence(run.history), evidence_sentence(tally, run.history), ids_sentence(run.scene))
+               if s]  # fmt: skip
     if run.scene is None:
         verdict.append("The scene's frames were not found (summary.json names no scene folder that exists): pass the "
                        "scene to see the frames, poses, image evidence and GT maps (lit-boot report RUN --scene DIR).")

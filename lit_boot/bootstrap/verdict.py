@@ -4,7 +4,8 @@ Without ground truth the frames are the only judge: where the final flow differs
 does frame t+1 warped by it match frame t better (a lower census error)? :class:`EvidenceTally`
 pools that over the pairs; its certainty is a z value over tiles of 16x16 px (neighbouring
 pixels' errors are not independent, tiles nearly are): the mean gain over the tiles where the
-flow changed, in standard errors. With ground truth, :func:`gt_sentence` says what it measured.
+flow changed, in standard errors. With ground truth, :func:`gt_sentence` says what it measured;
+with several people, :func:`ids_sentence` where a person's id may have switched.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
+from ..estimate.id_checks import checks_line, scene_checks
 from .metric_history import before_after
 from .pair_maps import CHANGED_PX, PairMaps
 
@@ -164,3 +166,13 @@ def gt_sentence(history: Sequence[dict[str, Any]]) -> str | None:
             unit = "mm" if key.endswith("_mm") else "px"
             parts.append(f"{words} {a:.3g} -> {b:.3g} {unit} ({_pct(a, b)})")
     return ("Against the ground truth: " + "; ".join(parts) + ". Lower is better.") if parts else None
+
+
+def ids_sentence(scene: Any) -> str | None:
+    """Where a person's id may have switched in a scene with several people (None for one person,
+    or where nothing is to check): the frames of :func:`~lit_boot.estimate.id_checks.frames_to_check`."""
+    line = checks_line(scene_checks(scene)) if scene is not None else ""
+    if not line:
+        return None
+    return (f"Several people: {line}. Where a track took another person's pose, that person's metrics and "
+            "target mix two people: look at those frames in the overlay.")
