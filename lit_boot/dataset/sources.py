@@ -21,6 +21,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from ..core.frame_runs import frame_runs
 from .tasks import Task, safe_name
 
 __all__ = [
@@ -92,17 +93,6 @@ def _select(available: Sequence[str], wanted: Iterable[str] | None, where: Path,
     return wanted
 
 
-def _runs(numbers: list[int]) -> list[tuple[int, int]]:
-    """Runs of consecutive numbers as (first, last)."""
-    runs: list[list[int]] = []
-    for n in numbers:
-        if runs and n == runs[-1][1] + 1:
-            runs[-1][1] = n
-        else:
-            runs.append([n, n])
-    return [(a, b) for a, b in runs]
-
-
 def sintel_tasks(
     root: str | os.PathLike,
     scenes: str | Iterable[str] | None = None,
@@ -130,7 +120,7 @@ def sintel_tasks(
     for scene in chosen:
         numbers = sorted(int(m.group(1)) for p in (folder / scene).iterdir() if (m := _SINTEL_FRAME.match(p.name)))
         args = {"root": str(_absolute(root)), "scene": scene, "pass_name": pass_name, **(reader_args or {})}
-        runs = _runs(numbers)
+        runs = frame_runs(numbers)
         for first, last in runs:
             window = {} if len(runs) == 1 else {"first": first, "last": last}
             name = scene if len(runs) == 1 else f"{scene}_{first:04d}-{last:04d}"

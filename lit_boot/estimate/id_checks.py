@@ -22,6 +22,7 @@ from collections.abc import Sequence
 
 import torch
 
+from ..core.frame_runs import frame_runs
 from ..core.people import Person
 from .track_cost import iou_matrix
 
@@ -77,12 +78,7 @@ def frames_to_check(people: Sequence[Person], min_iou: float = OVERLAP_IOU) -> l
 
 def frame_ranges(frames: Sequence[int], most: int = 6) -> str:
     """Increasing frame numbers as ranges, e.g. "3-5, 9"; more than ``most`` ranges end in ", ..."."""
-    spans: list[list[int]] = []
-    for f in frames:
-        if spans and f == spans[-1][1] + 1:
-            spans[-1][1] = f
-        else:
-            spans.append([f, f])
+    spans = frame_runs(frames)
     text = [str(a) if a == b else f"{a}-{b}" for a, b in spans[:most]]
     return ", ".join(text) + (", ..." if len(spans) > most else "")
 
