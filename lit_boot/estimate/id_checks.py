@@ -24,6 +24,7 @@ import torch
 
 from ..core.frame_runs import frame_runs
 from ..core.people import Person
+from .pose_duplicates import keypoint_extent
 from .track_cost import iou_matrix
 
 __all__ = ["frames_to_check", "frame_ranges", "checks_line", "scene_checks", "OVERLAP_IOU"]
@@ -42,8 +43,7 @@ def _boxes(person: Person) -> torch.Tensor:
         for t in range(T):
             seen = person.keypoints_conf[t] > 0
             if seen.any():
-                pts = person.keypoints2d[t, seen]
-                out[t] = torch.cat([pts.amin(0), pts.amax(0), torch.ones(1)])
+                out[t] = torch.cat([keypoint_extent(person.keypoints2d[t], seen), torch.ones(1)])
     if person.person_boxes is not None:
         boxed = person.person_boxes[:, 4] > 0
         out[boxed] = torch.cat([person.person_boxes[boxed, :4], torch.ones(int(boxed.sum()), 1)], -1)
@@ -54,18 +54,21 @@ def frames_to_check(people: Sequence[Person], min_iou: float = OVERLAP_IOU) -> l
     """Per person of ``people`` (each with keypoints2d (T, K, 2) and keypoints_conf (T, K), and/or
     person_boxes (T, 5)), a (T,) bool: the frames with a pose where its id may have switched
     (module docstring). A person without keypoints has none to check."""
-    boxes = torch.stack([_boxes(p) for p in people]) if people else torch.zeros(0, 0, 5)
+    if not people:
+        return []
+    boxes = torch.stack([_boxes(p) for p in people])  # (P, T, 5)
+    present = boxes[..., 4] > 0
+    overlap = torch.zeros(present.shape, dtype=torch.bool)  # (P, T): a box overlapping another's
+    for t in range(boxes.shape[1]):
+        iou = iou_matrix(boxes[:, t, :4], boxes[:, t, :4]).fill_diagonal_(0.0) * present[None, :, t]
+        overlap[:, t] = present[:, t] & (iou.amax(1) >= min_iou)
     out = []
     for i, person in enumerate(people):
         if person.keypoints_conf is None:
             out.append(torch.zeros(boxes.shape[1], dtype=torch.bool))
             continue
         posed = (person.keypoints_conf > 0).any(-1)
-        check = torch.zeros_like(posed)
-        for t in posed.nonzero().flatten().tolist():
-            others = [j for j in range(len(people)) if j != i and boxes[j, t, 4] > 0]
-            if boxes[i, t, 4] > 0 and others:
-                check[t] = bool(iou_matrix(boxes[i, t : t + 1, :4], boxes[others, t, :4]).max() >= min_iou)
+        check = posed & overlap[i]
         rows = posed.nonzero().flatten().tolist()
         if rows and rows[0] > 0:
             check[rows[0]] = True  # first seen after the clip's start

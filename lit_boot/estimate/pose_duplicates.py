@@ -21,7 +21,7 @@ import torch
 
 from .track_cost import iou_matrix
 
-__all__ = ["duplicate_frames", "duplicate_detections", "MAX_DISTANCE", "MIN_JOINTS"]
+__all__ = ["duplicate_frames", "duplicate_detections", "keypoint_extent", "MAX_DISTANCE", "MIN_JOINTS"]
 
 #: Two poses are one where their shared joints' median distance is below this share of the pose's
 #: size (the larger side of its confident keypoints' extent).
@@ -32,7 +32,7 @@ MIN_JOINTS = 4
 CONF = 0.3
 
 
-def _extent(keypoints: torch.Tensor, confident: torch.Tensor) -> torch.Tensor:
+def keypoint_extent(keypoints: torch.Tensor, confident: torch.Tensor) -> torch.Tensor:
     """(4,) x0, y0, x1, y1 of the confident keypoints (K, 2)."""
     points = keypoints[confident]
     return torch.cat([points.amin(0), points.amax(0)])
@@ -59,13 +59,14 @@ def duplicate_frames(
                 shared = confident[a] & confident[b]
                 if int(shared.sum()) < MIN_JOINTS or drop[a][t] or drop[b][t]:
                     continue
-                pose = _extent(keypoints[a][t], confident[a])
+                pose = keypoint_extent(keypoints[a][t], confident[a])
                 size = float((pose[2:] - pose[:2]).max().clamp_min(1.0))
                 apart = (keypoints[a][t, shared] - keypoints[b][t, shared]).norm(dim=-1).median()
                 if float(apart) >= MAX_DISTANCE * size:
                     continue
+                other = keypoint_extent(keypoints[b][t], confident[b])
                 fit_a, fit_b = (float(iou_matrix(extent[None], boxes[p][t, None, :4])[0, 0])
-                                for p, extent in ((a, pose), (b, _extent(keypoints[b][t], confident[b]))))  # fmt: skip
+                                for p, extent in ((a, pose), (b, other)))  # fmt: skip
                 if bridged is not None and bool(bridged[a][t]) != bool(bridged[b][t]):
                     fit_a, fit_b = float(not bridged[a][t]), float(not bridged[b][t])
                 drop[b if fit_a >= fit_b else a][t] = True
