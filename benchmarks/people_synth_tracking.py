@@ -14,7 +14,7 @@ the other people walk across, crossing and occluding person 0.
 Usage: python benchmarks/people_synth_tracking.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--jitter 0.05] [--miss 0.1] [--smoothing 0.5] [--keypoints]
            [--pose-miss 0.3|seen] [--keypoint-weight 1] [--no-stitch] [--beam 1] [--min-visible 8]
-           [--json out.json] [--grid [--seen-poses]]
+           [--looks] [--json out.json] [--grid [--seen-poses]]
 
 ``--grid`` prints one line instead of the table: the identity switches summed over the people of
 the scenes, "noisy" (5% jitter, 10% missed), "exact" (none) and "harder" (10%/20%, 5%/20% and
@@ -22,7 +22,9 @@ the scenes, "noisy" (5% jitter, 10% missed), "exact" (none) and "harder" (10%/20
 total (BENCHMARKS.md, "Keypoints in the tracker"); --jitter, --miss and --pose-miss are then unused.
 ``--pose-miss seen`` misses a detection's pose as the product's own estimator does on these scenes,
 by how much of the person is seen (:data:`POSE_FOUND_BY_SEEN`), not at random; ``--grid
---seen-poses`` prints "noisy, exact, harder; total" with the poses missed that way.
+--seen-poses`` prints "noisy, exact, harder; total" with the poses missed that way. ``--looks``
+gives the tracker each detection's look (:func:`lit_boot.estimate.looks.detection_looks`: the colours
+of the rendered frame near its keypoints), as the product's estimator does.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ import torch
 import torch.nn.functional as F
 
 from lit_boot.estimate import track_people
+from lit_boot.estimate.looks import detection_looks
 from lit_boot.synth import make_scene
 
 MOTIONS = ("walk", "run", "wave")
@@ -142,8 +145,9 @@ def switches(args: argparse.Namespace, jitter: float, miss: float, pose_miss: fl
             kps = [k * ~pose_missed([int(seen[p, t]) for p in who[t]], pose_miss, g)[:, None, None]
                    for t, k in enumerate(kps)]  # fmt: skip
             options = {"smoothing": args.smoothing, "keypoint_weight": args.keypoint_weight, "beam": args.beam}
+            looks = detection_looks(scene.frames, dets, kps) if args.looks and args.keypoints else None
             tracks = track_people(dets, keypoints=kps if args.keypoints else None, stitch=not args.no_stitch,
-                                  **{k: v for k, v in options.items() if v is not None})  # fmt: skip
+                                  looks=looks, **{k: v for k, v in options.items() if v is not None})  # fmt: skip
             visible = torch.stack([p.person_boxes[:, 4] > 0 for p in scene.people()])
             rows = score(tracks, dets, who, visible)
             total += sum(r["switches"] for r in rows)
@@ -183,6 +187,9 @@ def main() -> None:
     parser.add_argument("--keypoint-weight", type=float, default=None, help="track_people's keypoint_weight")
     parser.add_argument("--no-stitch", action="store_true", help="track_people(stitch=False)")
     parser.add_argument("--beam", type=int, default=None, help="track_people's beam (1: frame by frame)")
+    parser.add_argument("--looks", action="store_true",
+                        help="with --keypoints: give the tracker each detection's look (the colours near its joints "
+                        "in the rendered frame), as the product's estimator does")
     parser.add_argument("--min-visible", type=int, default=1,
                         help="detect a person only where this many of its keypoints are seen (1: any)")
     parser.add_argument("--json", default=None)

@@ -10,8 +10,10 @@ the conversions in :mod:`.world_to_lsp` and :mod:`.tracking` need no MediaPipe.
 detector is built); ``main_person_boxes(detections)`` follows one person over the frames, and
 ``person_boxes(frames, "yolox_nano")`` does both (``estimate_poses(..., detector=...)`` adds them
 to the estimates: the region the method zooms on). ``track_people(detections)`` follows every
-person (ids kept through crossings), and ``estimate_poses(..., people="all")`` gives each tracked
-person a pose, top-down (the main person first, the others in ``PoseEstimates.others``).
+person (ids kept through crossings; with ``looks=detection_looks(frames, detections, keypoints)``,
+the colours near each pose's joints, a person hidden for long is found again), and
+``estimate_poses(..., people="all")`` gives each tracked person a pose, top-down (the main person
+first, the others in ``PoseEstimates.others``).
 ``estimate_people(estimator, frames, detector, people)`` runs any top-down
 :class:`PersonPoseEstimator` (``estimate_person(frames, boxes)``, ``keep_frames(estimates,
 keep)``; MediaPipe's is :class:`MediaPipeCrops`) on every tracked person.
@@ -48,6 +50,7 @@ from .mediapipe_pose import (
 )
 from .id_checks import checks_line, frame_ranges, frames_to_check, scene_checks
 from .keypoint_tracks import link_keypoint_people, read_tracked_estimates
+from .looks import detection_looks, look_distance
 from .people_pose import (
     MediaPipeCrops,
     PersonPoseEstimator,
@@ -106,6 +109,8 @@ __all__ = [
     "parse_people",
     "select_people",
     "track_people",
+    "detection_looks",
+    "look_distance",
     "frames_to_check",
     "frame_ranges",
     "checks_line",

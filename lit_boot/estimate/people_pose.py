@@ -4,7 +4,8 @@
 square crops around each detection (:func:`~.crop_pose.crop_landmarks`, the framings of
 :data:`~.crop_pose.CROP_ATTEMPTS` in turn; :func:`detection_keypoints`), links the boxes into
 tracks by their overlap and their keypoints (:func:`~.people_track.track_people`: who is who
-where two boxes overlap), keeps the ones ``people`` asks for (all, the largest, or the N most
+where two boxes overlap; a person hidden for longer than a gap is found again by its look, the
+colours near its joints, :mod:`.looks`), keeps the ones ``people`` asks for (all, the largest, or the N most
 prominent) and gives each track the poses of its boxes (the crops of the frames it bridges are
 run then; :class:`MediaPipeCrops` runs each crop once). A crop may show a neighbour more clearly
 than the detection's person: a pose counts for it only where the centre of its confident
@@ -33,6 +34,7 @@ from ..core.cameras import inside_image
 from ..core.people import Person
 from ..data.readers.pose_file import PoseEstimates
 from .id_checks import frames_to_check
+from .looks import detection_looks
 from .people_track import select_people, track_people
 from .pose_duplicates import duplicate_detections, duplicate_frames
 from .tracking import body_box
@@ -187,7 +189,8 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
     doubled = duplicate_detections(detections, keypoints)  # a box around two people beside one of theirs
     detections = [d[~drop] for d, drop in zip(detections, doubled)]
     keypoints = [k[~drop] for k, drop in zip(keypoints, doubled)]
-    tracks = select_people(track_people(detections, keypoints=keypoints), people)
+    looks = detection_looks(frames, detections, keypoints)
+    tracks = select_people(track_people(detections, keypoints=keypoints, looks=looks), people)
     found = [_one_person(estimator, frames, boxes) for boxes in tracks]
     duplicates = duplicate_frames([est.keypoints2d for est, _ in found], [est.keypoints_conf for est, _ in found],
                                   list(tracks), [bridged_frames(boxes, detections) for boxes in tracks])  # fmt: skip

@@ -22,10 +22,11 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
+from .looks import look_distance
 from .person_track import check_detections
 from .track_cost import KEYPOINT_WEIGHT, SMOOTHING, TrackState, box_centre, box_side
 from .track_search import assign, link
@@ -38,19 +39,44 @@ log = logging.getLogger(__name__)
 PEOPLE_CHOICES = ("all", "largest")
 #: The hypotheses the link keeps per frame (BENCHMARKS.md, "Tracking with hindsight").
 BEAM = 16
+#: The largest Hellinger distance between two tracklets' looks that joins them after a long gap
+#: (BENCHMARKS.md, "Found again after a long gap").
+MAX_LOOK = 0.4
 
 
 @dataclass
 class _Tracklet:
-    """A linked track while stitching: its boxes (frame -> (5,) box and score), last frame, velocity."""
+    """A linked track while stitching: its boxes (frame -> (5,) box and score), last frame, velocity,
+    and its detections' looks (frame -> (D,), the frames whose detection has one)."""
 
     boxes: dict[int, torch.Tensor]
     last: int
     velocity: torch.Tensor
+    looks: dict[int, torch.Tensor] = field(default_factory=dict)
+    mean_look: torch.Tensor | None = field(default=None, repr=False)  # look()'s, until the tracklet is joined
 
     @classmethod
-    def of(cls, state: TrackState) -> _Tracklet:
-        return cls(state.boxes(), state.last, state.velocity)
+    def of(cls, state: TrackState, detections: list[torch.Tensor],
+           looks: Sequence[torch.Tensor] | None) -> _Tracklet:  # fmt: skip
+        boxes = state.boxes()
+        return cls(boxes, state.last, state.velocity, {} if looks is None else _looks_of(boxes, detections, looks))
+
+    def look(self) -> torch.Tensor | None:
+        """The mean of its looks, None without any."""
+        if self.mean_look is None and self.looks:
+            self.mean_look = torch.stack(list(self.looks.values())).mean(0)
+        return self.mean_look
+
+
+def _looks_of(boxes: dict[int, torch.Tensor], detections: list[torch.Tensor],
+              looks: Sequence[torch.Tensor]) -> dict[int, torch.Tensor]:  # fmt: skip
+    """Frame -> the look of the detection each box is (the link keeps the detection's own row), where it has one."""
+    out = {}
+    for t, box in boxes.items():
+        same = (detections[t] == box).all(-1).nonzero()
+        if len(same) and float(looks[t][int(same[0])].sum()) > 0:
+            out[t] = looks[t][int(same[0])]
+    return out
 
 
 def _median_side(track: _Tracklet) -> float:
@@ -79,27 +105,58 @@ def _stitch_cost(a: _Tracklet, b: _Tracklet, max_scale: float) -> float:
     return float(torch.maximum(forward.norm(), backward.norm())) / max(side_a, side_b)
 
 
-def _stitch(tracks: list[_Tracklet], max_gap: int, max_scale: float, max_jump: float) -> list[_Tracklet]:
-    """Tracklets joined where one starts within ``max_gap`` + 1 frames after another ended and
-    their motions meet within the link's own reach, ``max_jump`` box sides per frame of the gap
-    (:func:`_stitch_cost`), the closest pairs first (an optimal assignment per pass): the
-    frame-by-frame link refuses such a pair where an occluded person's box shrinks to its
-    visible part or jumps, comparing single boxes."""
+def _join(tracks: list[_Tracklet], cost_of, limit: float) -> list[_Tracklet]:
+    """Tracklets joined where ``cost_of(a, b)`` (b starting after a ends; inf: never) is below
+    ``limit``, the cheapest pairs first (an optimal assignment per pass, passes until none is left)."""
     while True:
         cost = torch.full((len(tracks), len(tracks)), math.inf)
         for i, a in enumerate(tracks):
             for j, b in enumerate(tracks):
-                if 0 < (gap := min(b.boxes) - a.last) <= max_gap + 1:
-                    cost[i, j] = _stitch_cost(a, b, max_scale) / gap
-        pairs = assign(cost.masked_fill(cost >= max_jump, math.inf), miss=max_jump)
+                if min(b.boxes) > a.last:
+                    cost[i, j] = cost_of(a, b)
+        pairs = assign(cost.masked_fill(cost >= limit, math.inf), miss=limit)
         if not pairs:
             return tracks
         for i, j in pairs:  # a and b distinct: b starts after a ends
             a, b = tracks[i], tracks[j]
             a.boxes.update(b.boxes)
+            a.looks.update(b.looks)
+            a.mean_look = None
             a.last, a.velocity = b.last, _end_velocity(a, b)
             b.boxes = {}
         tracks = [tr for tr in tracks if tr.boxes]
+
+
+def _stitch(tracks: list[_Tracklet], max_gap: int, max_scale: float, max_jump: float) -> list[_Tracklet]:
+    """Tracklets joined where one starts within ``max_gap`` + 1 frames after another ended and
+    their motions meet within the link's own reach, ``max_jump`` box sides per frame of the gap
+    (:func:`_stitch_cost`), the closest pairs first: the frame-by-frame link refuses such a pair
+    where an occluded person's box shrinks to its visible part or jumps, comparing single boxes."""
+
+    def cost_of(a: _Tracklet, b: _Tracklet) -> float:
+        gap = min(b.boxes) - a.last
+        return _stitch_cost(a, b, max_scale) / gap if gap <= max_gap + 1 else math.inf
+
+    return _join(tracks, cost_of, max_jump)
+
+
+def _reidentify(tracks: list[_Tracklet], max_scale: float, max_jump: float, max_look: float,
+                min_frames: int) -> list[_Tracklet]:  # fmt: skip
+    """Tracklets joined after a gap of any length where their looks (each one's mean) are within
+    ``max_look`` of each other (:func:`.looks.look_distance`) and their motions meet within
+    ``max_jump`` box sides per frame of the gap, the closest looks first: a person hidden for longer
+    than the link and the stitch bridge, found again. Each must be seen in ``min_frames`` frames,
+    a track of its own (a stray detection, a chair taken for a person, is not someone found again)."""
+
+    def cost_of(a: _Tracklet, b: _Tracklet) -> float:
+        look_a, look_b = a.look(), b.look()
+        if look_a is None or look_b is None or min(len(a.boxes), len(b.boxes)) < min_frames:
+            return math.inf
+        if _stitch_cost(a, b, max_scale) / (min(b.boxes) - a.last) > max_jump:
+            return math.inf
+        return float(look_distance(look_a, look_b))
+
+    return _join(tracks, cost_of, max_look)
 
 
 def _dense(track: _Tracklet, T: int, max_gap: int) -> torch.Tensor:
@@ -129,6 +186,8 @@ def track_people(
     keypoint_weight: float = KEYPOINT_WEIGHT,
     stitch: bool = True,
     beam: int = BEAM,
+    looks: Sequence[torch.Tensor] | None = None,
+    max_look: float = MAX_LOOK,
 ) -> torch.Tensor:
     """Every person's box in each frame, from per-frame detections (T tensors (N_t, 5): x0, y0,
     x1, y1 px, score, as :meth:`PersonDetector.detect_frames` gives them).
@@ -166,20 +225,34 @@ def track_people(
             assignments and the cheapest ``beam`` over the frames so far go on, so a frame's
             choice is judged by the frames after it (:mod:`.track_search`); 1: each frame's
             optimal assignment, decided there.
+        looks: optional, each detection's look: T tensors (N_t, D), a colour histogram summing
+            to 1 or zeros (none), one row per detection of that frame (:func:`.looks.detection_looks`).
+            After the stitch, a tracklet that starts any number of frames after another ended
+            continues it where their looks (each one's mean) are within ``max_look`` (Hellinger
+            distance), their motions meet within ``max_jump`` box sides per frame of the gap and
+            each is seen in ``min_frames`` frames, the closest looks first: a person hidden for
+            longer than ``max_gap`` found again (BENCHMARKS.md, "Found again after a long gap").
+            None: no such join.
+        max_look: see ``looks``.
 
     Returns:
         (P, T, 5) float32: each track's box and score per frame (zeros where the person is
         absent), most prominent first (see the module docstring); P may be 0.
     """
     _check_options(max_gap, max_jump, min_iou, max_scale, min_frames, smoothing, keypoint_weight, beam)
+    if not 0 <= max_look <= 1:
+        raise ValueError(f"max_look: expected a Hellinger distance in [0, 1], got {max_look!r}")
     detections = check_detections(detections)
     keypoints = None if keypoints is None or keypoint_weight == 0 else _check_keypoints(keypoints, detections)
     T = len(detections)
-    linked = [_Tracklet.of(tr) for tr in link(detections, keypoints, beam=beam, max_gap=max_gap, smoothing=smoothing,
-                                               min_iou=min_iou, max_jump=max_jump, max_scale=max_scale,
-                                               keypoint_weight=keypoint_weight)]  # fmt: skip
+    looks = None if looks is None else _check_looks(looks, detections)
+    linked = [_Tracklet.of(tr, detections, looks)
+              for tr in link(detections, keypoints, beam=beam, max_gap=max_gap, smoothing=smoothing, min_iou=min_iou,
+                             max_jump=max_jump, max_scale=max_scale, keypoint_weight=keypoint_weight)]  # fmt: skip
     if stitch:
         linked = _stitch(linked, max_gap, max_scale, max_jump)
+    if looks is not None:
+        linked = _reidentify(linked, max_scale, max_jump, max_look, min(min_frames, T))
     tracks = [tr for tr in linked if len(tr.boxes) >= min(min_frames, T)]
     if not tracks:
         return torch.zeros(0, T, 5)
@@ -224,6 +297,22 @@ def _check_keypoints(keypoints: Sequence[torch.Tensor], detections: list[torch.T
                              f"detection, got {tuple(kp.shape)}")  # fmt: skip
         K = kp.shape[1] if kp.shape[0] else K
         out.append(kp)
+    return out
+
+
+def _check_looks(looks: Sequence[torch.Tensor], detections: list[torch.Tensor]) -> list[torch.Tensor]:
+    """The per-detection looks as float32 CPU tensors; ValueError naming the frame where they do not
+    match the detections (N_t, D), or where D differs between frames."""
+    if len(looks) != len(detections):
+        raise ValueError(f"looks: expected one tensor per frame ({len(detections)}), got {len(looks)}")
+    out, D = [], None
+    for t, (look, det) in enumerate(zip(looks, detections)):
+        look = torch.as_tensor(look, dtype=torch.float32).cpu()
+        if look.ndim != 2 or look.shape[0] != det.shape[0] or (D is not None and look.shape[0] and look.shape[1] != D):
+            raise ValueError(f"looks[{t}]: expected ({det.shape[0]}, {D or 'D'}) one look per detection, "
+                             f"got {tuple(look.shape)}")  # fmt: skip
+        D = look.shape[1] if look.shape[0] else D
+        out.append(look)
     return out
 
 
