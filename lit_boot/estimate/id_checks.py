@@ -11,9 +11,9 @@ where its id is a choice the frames may not settle:
 
 A box is the person's ``person_boxes`` where present (score > 0), else the extent of its confident
 keypoints (x0, y0, x1, y1 px, pixel centres at integer coordinates). On synthetic scenes with 2
-and 3 people crossing for most of the clip, these frames hold 78 of the 80 identity switches of
+and 3 people crossing for most of the clip, these frames hold 70 of the 72 identity switches of
 the poses the built-in estimator makes, and are 22-24% of the frames with a pose (BENCHMARKS.md,
-"Where to check the ids").
+"Where to check the ids", "Found again after a long gap").
 """
 
 from __future__ import annotations
