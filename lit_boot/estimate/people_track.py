@@ -10,7 +10,10 @@ frames after it, so a track that took the wrong person where two overlap is give
 when the next frames show it. A track not seen for more than ``max_gap`` frames ends; an
 unmatched detection starts a new track. Then a track that starts just after another ends
 continues it where their motions meet within ``max_jump`` per frame (``stitch``: an occluded
-person's box shrinks or jumps, and the link refuses it). Tracks seen in fewer than
+person's box shrinks or jumps, and the link refuses it); with the detections' looks (the colours
+near each pose's joints, :mod:`.looks`), a tracklet that starts any number of frames later
+continues one whose look it shares (a person hidden for longer than ``max_gap``, found again).
+Tracks seen in fewer than
 ``min_frames`` frames (capped at T) are dropped (a stray detection), gaps of at most ``max_gap``
 frames are bridged by linear interpolation of the box and score, and the tracks are ordered by
 prominence (the sum over frames of box area x score): person 0 is the most prominent. Boxes are
@@ -21,7 +24,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import torch
@@ -105,7 +108,8 @@ def _stitch_cost(a: _Tracklet, b: _Tracklet, max_scale: float) -> float:
     return float(torch.maximum(forward.norm(), backward.norm())) / max(side_a, side_b)
 
 
-def _join(tracks: list[_Tracklet], cost_of, limit: float) -> list[_Tracklet]:
+def _join(tracks: list[_Tracklet], cost_of: Callable[[_Tracklet, _Tracklet], float],
+          limit: float) -> list[_Tracklet]:  # fmt: skip
     """Tracklets joined where ``cost_of(a, b)`` (b starting after a ends; inf: never) is below
     ``limit``, the cheapest pairs first (an optimal assignment per pass, passes until none is left)."""
     while True:
