@@ -52,6 +52,8 @@ def test_no_look_without_enough_confident_joints_or_pixels():
     looks = detection_looks(frames, dets, kps)
     assert [tuple(x.shape) for x in looks] == [(2, LOOK_BINS**3), (0, LOOK_BINS**3)]
     assert float(looks[0][0, colour_bin(RED)]) == pytest.approx(1.0) and float(looks[0][1].sum()) == 0
+    with pytest.raises(ValueError, match="uint8"):
+        detection_looks(frames.float() / 255, dets, kps)  # colours in [0, 1] would all fall in one bin
 
 
 def hidden_for_long(T: int = 16, hidden: range = range(4, 12), back_at: float = 0.0):

@@ -53,6 +53,8 @@ def detection_looks(frames: torch.Tensor, detections: Sequence[torch.Tensor],
                     keypoints: Sequence[torch.Tensor]) -> list[torch.Tensor]:  # fmt: skip
     """Each detection's look: per frame (N_t, LOOK_BINS**3), from frames (T, 3, H, W) uint8 RGB,
     the detections (N_t, 5) x0, y0, x1, y1 px, score and their keypoints (N_t, K, 3)."""
+    if frames.dtype != torch.uint8 or frames.ndim != 4 or frames.shape[1] != 3:
+        raise ValueError(f"frames: expected (T, 3, H, W) uint8 RGB, got {tuple(frames.shape)} {frames.dtype}")
     return [torch.stack([joint_look(frame, kp, float(box_side(box))) for box, kp in zip(dets, kps)])
             if dets.shape[0] else torch.zeros(0, LOOK_BINS**3)
             for frame, dets, kps in zip(frames, detections, keypoints)]  # fmt: skip
