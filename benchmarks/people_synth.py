@@ -51,6 +51,15 @@ def change(initial: torch.Tensor, final: torch.Tensor, gt: torch.Tensor, where: 
     return float(100 * (after / before - 1))
 
 
+def changes(result, scene, people: list[torch.Tensor], background: torch.Tensor) -> dict:
+    """A run's EPE changes (%, one decimal) against pretrained RAFT's on each person's pixels
+    (``people``, from :func:`masks`), the background and every scored pixel."""
+    gt = scene.gt.flow
+    return {"person": [round(change(result.initial_flows, result.flows, gt, m), 1) for m in people],
+            "background": round(change(result.initial_flows, result.flows, gt, background), 1),
+            "all": round(change(result.initial_flows, result.flows, gt, scene.gt.flow_mask()), 1)}  # fmt: skip
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--mode", default="3d")
@@ -78,11 +87,8 @@ def main() -> None:
                 result = bootstrap(run_scene, out, mode=args.mode, flow=flow, progress_bar=False, video=False,
                                    **json.loads(args.config))
                 seconds = time.perf_counter() - start
-                gt = scene.gt.flow
                 row = {"people": n, "seed": seed, "variant": variant, "seconds": round(seconds, 1),
-                       "person": [round(change(result.initial_flows, result.flows, gt, m), 1) for m in people],
-                       "background": round(change(result.initial_flows, result.flows, gt, background), 1),
-                       "all": round(change(result.initial_flows, result.flows, gt, scene.gt.flow_mask()), 1)}  # fmt: skip
+                       **changes(result, scene, people, background)}  # fmt: skip
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     if args.json:

@@ -32,7 +32,7 @@ from lit_boot.core.cameras import Cameras
 from lit_boot.core.people import Person
 from lit_boot.estimate import PersonDetector, estimate_poses
 from lit_boot.synth import make_scene
-from people_synth import change, masks
+from people_synth import changes, masks
 from people_synth_e2e import pose_owners, pose_switches, visible_boxes
 from people_synth_tracking import MOTIONS, scene_parser, true_people
 from real_data import SHARED
@@ -122,13 +122,10 @@ def main() -> None:
                 start = time.perf_counter()
                 result = bootstrap(estimates.apply_to(bare(scene)), out, mode=args.mode,
                                    flow={"weights": args.weights}, progress_bar=False, video=False)  # fmt: skip
-                gt, scored = scene.gt.flow, scene.gt.flow_mask()
                 row = {"people": n, "seed": seed, "variant": variant, "seconds": round(time.perf_counter() - start, 1),
                        "pose_switches": int(sum(s["pose_switches"] for s in switches)) if variant == "own" else 0,
                        "pose_frames": [int(s["pose_frames"]) for s in switches],
-                       "person": [round(change(result.initial_flows, result.flows, gt, m), 1) for m in people_px],
-                       "background": round(change(result.initial_flows, result.flows, gt, background), 1),
-                       "all": round(change(result.initial_flows, result.flows, gt, scored), 1)}  # fmt: skip
+                       **changes(result, scene, people_px, background)}  # fmt: skip
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     if args.json:
