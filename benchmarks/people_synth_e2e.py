@@ -21,8 +21,13 @@ in --seeds, as benchmarks/people_synth_tracking.py).
 Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_e2e.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--height 256] [--width 512] [--min-iou 0.3] [--min-pixels 50]
            [--detector ../shared/checkpoints/yolox_nano.onnx] [--det-score 0.25] [--det-iou 0.45]
-           [--on-jump keep] [--max-jump 0.5] [--why]
+           [--on-jump keep] [--max-jump 0.5] [--why] [--true-boxes]
            [--json out.json]
+
+With ``--true-boxes`` the detector is replaced by the true people's visible boxes (each person's
+seen pixels' extent wherever at least --min-pixels are seen, score 1: a detector that never
+merges two people nor misses one), so that what is left is the pose estimator's and the
+tracker's; everything else as above.
 
 The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, the
 returned people that cover nobody, and the frames with a pose on a true person and those poses' switches,
@@ -51,6 +56,18 @@ def returned_people(scene, detector: PersonDetector, **options) -> list:
     returns with a pose in some frame (Person, each with its boxes), as a user's run gives them."""
     every = estimate_poses(scene.frames, people="all", detector=detector, **options)
     return [p for p in every.people() if p.person_boxes is not None and p.keypoints_conf.amax() > 0]
+
+
+class TrueBoxes(PersonDetector):
+    """A detector that returns one scene's true visible boxes (:func:`visible_boxes`), for
+    ``--true-boxes``: ``detect_frames`` gives per frame the boxes (N_t, 5) of the people seen,
+    in ``scene.people()`` order."""
+
+    def __init__(self, boxes: torch.Tensor):  # boxes (P, T, 5); no model to load
+        self.boxes, self.path = boxes, Path("true-boxes")
+
+    def detect_frames(self, frames: torch.Tensor) -> list[torch.Tensor]:
+        return [self.boxes[:, t][self.boxes[:, t, 4] > 0] for t in range(self.boxes.shape[1])]
 
 
 def visible_boxes(scene, min_pixels: int) -> torch.Tensor:
@@ -189,6 +206,8 @@ def main() -> None:
     parser.add_argument("--det-score", type=float, default=0.25, help="PersonDetector's score threshold")
     parser.add_argument("--det-iou", type=float, default=0.45, help="PersonDetector's NMS IoU threshold")
     parser.add_argument("--why", action="store_true", help="print each switch of the poses and its kind")
+    parser.add_argument("--true-boxes", action="store_true",
+                        help="the true people's visible boxes in place of the detector (module docstring)")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     detector = PersonDetector(args.detector, score=args.det_score, iou=args.det_iou)
@@ -201,11 +220,12 @@ def main() -> None:
         for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
             scene = make_scene(frames=args.frames, height=args.height, width=args.width, seed=seed, people=n,
                                motion=MOTIONS[i % len(MOTIONS)])  # fmt: skip
+            truth = visible_boxes(scene, args.min_pixels)
             start = time.perf_counter()
-            posed = returned_people(scene, detector, on_jump=args.on_jump, max_jump=args.max_jump)
+            posed = returned_people(scene, TrueBoxes(truth) if args.true_boxes else detector,
+                                    on_jump=args.on_jump, max_jump=args.max_jump)  # fmt: skip
             seconds = time.perf_counter() - start
             found = torch.stack([p.person_boxes for p in posed]) if posed else torch.zeros(0, args.frames, 5)
-            truth = visible_boxes(scene, args.min_pixels)
             rows, false = score(found, truth, args.min_iou)
             owners = pose_owners(posed, true_people(scene), truth[..., 4] > 0, args.max_pose_dist)
             for row, on_pose in zip(rows, pose_switches(owners)):
