@@ -312,3 +312,46 @@ def test_keep_frames_refits_any_estimates_the_crops_made():
     other = crops(frames).estimate_person(frames, a)  # made by another estimator: masked, nothing to refit
     masked = estimator.keep_frames(other, torch.tensor([True, False, True, True]))
     assert (masked.keypoints_conf[1] == 0).all() and masked.metadata["missing_frames"] == []
+
+
+class ByBoxCentre:
+    """An estimator whose crop shows a pose (OnWhoeverIsThere's layout) at the x that ``table[t]``
+    gives for the box's centre: (centre x, pose x) pairs, the nearest centre's."""
+
+    def __init__(self, table):
+        self.table = table
+
+    def estimate_person(self, frames, boxes):
+        from lit_boot.data.readers import PoseEstimates
+
+        T = boxes.shape[0]
+        kp, conf = torch.zeros(T, 17, 2), torch.zeros(T, 17)
+        for t in range(T):
+            if boxes[t, 4] > 0:
+                centre = float(boxes[t, 0] + boxes[t, 2]) / 2
+                _, x = min(self.table[t], key=lambda pair: abs(pair[0] - centre))
+                kp[t], conf[t] = OnWhoeverIsThere.layout + torch.tensor([x, 0.0]), 1.0
+        return PoseEstimates(keypoints2d=kp, keypoints_conf=conf, keypoints_layout="coco17")
+
+    def keep_frames(self, estimates, keep):
+        return mask_frames(estimates, keep)
+
+
+def test_a_pose_borrowed_from_the_person_in_front_counts_for_neither_track():
+    """A (red) stands at x = 140; B (blue) walks in from the left, clear of A in frame 0. In frame
+    2 B's box overlaps A's and its crop shows A (red) a little off A's own pose, so no duplicate:
+    B has no pose there, A keeps its own everywhere."""
+    frames = torch.full((3, 3, H, W), 128, dtype=torch.uint8)
+    frames[:, :, :, 120:161] = torch.tensor([230, 20, 20], dtype=torch.uint8)[:, None, None]
+    for t, (x0, x1) in enumerate([(55, 96), (85, 119)]):
+        frames[t, :, :, x0:x1] = torch.tensor([20, 20, 230], dtype=torch.uint8)[:, None, None]
+    a = [100.0, 10.0, 180.0, 110.0, 0.9]
+    b = [[x - 15.0, 20.0, x + 15.0, 100.0, 0.8] for x in (75.0, 105.0, 142.0)]
+    table = [[(140.0, 140.0), (75.0, 75.0)], [(140.0, 140.0), (105.0, 105.0)], [(140.0, 140.0), (142.0, 150.0)]]
+    est = estimate_people(ByBoxCentre(table), frames, KnownBoxes([[a, b[t]] for t in range(3)]), "all")
+    assert est.num_people == 2
+    main, other = est.people()
+    posed = lambda person: (person.keypoints_conf > 0).any(-1).tolist()  # noqa: E731
+    assert posed(main) == [True, True, True] and posed(other) == [True, True, False]
+    assert [r["borrowed"] for r in est.metadata["people"]] == [0, 1]
+    assert [r["duplicates"] for r in est.metadata["people"]] == [0, 0]

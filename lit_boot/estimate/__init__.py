@@ -16,7 +16,8 @@ the colours near each pose's joints, a person hidden for long is found again), a
 first, the others in ``PoseEstimates.others``).
 ``estimate_people(estimator, frames, detector, people)`` runs any top-down
 :class:`PersonPoseEstimator` (``estimate_person(frames, boxes)``, ``keep_frames(estimates,
-keep)``; MediaPipe's is :class:`MediaPipeCrops`) on every tracked person.
+keep)``; MediaPipe's is :class:`MediaPipeCrops`) on every tracked person; where two people's
+boxes overlap, a pose whose look is the other's counts for neither (``borrowed_frames``).
 ``read_tracked_estimates(path)`` reads every person of an external COCO keypoint or DCPose file,
 linked into tracks by the file's track ids or by the same tracker. ``frames_to_check(people)``
 marks, per person, the frames where its id may have switched (people overlapping, or found again).
@@ -48,6 +49,7 @@ from .mediapipe_pose import (
     run_mediapipe,
     summary_line,
 )
+from .borrowed_poses import borrowed_frames
 from .id_checks import checks_line, frame_ranges, frames_to_check, scene_checks
 from .keypoint_tracks import link_keypoint_people, read_tracked_estimates
 from .looks import detection_looks, look_distance
@@ -111,6 +113,7 @@ __all__ = [
     "track_people",
     "detection_looks",
     "look_distance",
+    "borrowed_frames",
     "frames_to_check",
     "frame_ranges",
     "checks_line",

@@ -16,7 +16,9 @@ detection's in that frame, with a box that fits the pose worse (a box around two
 people beside a box of one of them), is dropped (counted in ``metadata["duplicate_detections"]``);
 after, a pose two tracks' crops both give counts for the track whose box there is a detection
 rather than the tracker's guess across a gap (:func:`bridged_frames`), else for the one whose box
-fits it best (the other's frames counted in ``metadata["people"][i]["duplicates"]``). A track on which no pose is
+fits it best (the other's frames counted in ``metadata["people"][i]["duplicates"]``). Where two
+people's boxes overlap, a pose that looks like the other's (:mod:`.borrowed_poses`: the colours near
+its joints) counts for neither (``metadata["people"][i]["borrowed"]``). A track on which no pose is
 found in any frame is left out (``metadata["people_without_pose"]``). The frames where a person's id may have switched
 (:func:`~.id_checks.frames_to_check`) are listed in ``metadata["people"][i]["check_ids"]`` (video frame numbers).
 Person 0 (the main person) is the most prominent track with a pose; track ids number the tracks by prominence.
@@ -33,9 +35,10 @@ import torch
 from ..core.cameras import inside_image
 from ..core.people import Person
 from ..data.readers.pose_file import PoseEstimates
+from .borrowed_poses import borrowed_frames
 from .id_checks import frames_to_check
 from .looks import detection_looks
-from .people_track import select_people, track_people
+from .people_track import MAX_LOOK, select_people, track_people
 from .pose_duplicates import duplicate_detections, duplicate_frames
 from .tracking import body_box
 
@@ -192,15 +195,18 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
     looks = detection_looks(frames, detections, keypoints)
     tracks = select_people(track_people(detections, keypoints=keypoints, looks=looks), people)
     found = [_one_person(estimator, frames, boxes) for boxes in tracks]
-    duplicates = duplicate_frames([est.keypoints2d for est, _ in found], [est.keypoints_conf for est, _ in found],
-                                  list(tracks), [bridged_frames(boxes, detections) for boxes in tracks])  # fmt: skip
+    keypoints, conf = [est.keypoints2d for est, _ in found], [est.keypoints_conf for est, _ in found]
+    borrowed = borrowed_frames(frames, keypoints, conf, list(tracks), MAX_LOOK)  # a neighbour's pose in one's crop
+    conf = [c * ~lent[:, None] for c, lent in zip(conf, borrowed)]
+    bridged = [bridged_frames(boxes, detections) for boxes in tracks]
+    duplicates = duplicate_frames(keypoints, conf, list(tracks), bridged)
     estimates, records = [], []
-    for track_id, (boxes, (est, not_theirs), twice) in enumerate(zip(tracks, found, duplicates)):
-        est = estimator.keep_frames(est, ~twice) if bool(twice.any()) else est
+    for track_id, (boxes, (est, not_theirs), twice, lent) in enumerate(zip(tracks, found, duplicates, borrowed)):
+        est = estimator.keep_frames(est, ~(twice | lent)) if bool((twice | lent).any()) else est
         estimates.append(replace(est, person_boxes=boxes, track_id=track_id))
         records.append({"track_id": track_id, "box_frames": int((boxes[:, 4] > 0).sum()),
                         "pose_frames": int(est.found().sum()), "not_theirs": not_theirs,
-                        "duplicates": int(twice.sum())})  # fmt: skip
+                        "duplicates": int(twice.sum()), "borrowed": int(lent.sum())})  # fmt: skip
     with_pose = [est for est in estimates if bool(est.found().any())]
     for est, check in zip(with_pose, frames_to_check([Person.of(est) for est in with_pose])):
         records[est.track_id]["check_ids"] = est.frame_indices[check].tolist()
