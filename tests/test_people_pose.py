@@ -215,14 +215,15 @@ def test_a_box_whose_pose_another_box_fits_better_is_dropped_before_tracking():
     assert torch.equal(est.person_boxes[3, :4], torch.tensor(loose[:4])) and est.found().all()
 
 
-class OnWhoeverIsThere:
-    """An estimator whose crop shows the person whose pose centre is nearest the box's centre
-    among those in ``seen`` (per frame, the x of each visible person; a pose 30 x 80 px)."""
+class ByBoxCentre:
+    """An estimator whose crop shows a pose 30 x 80 px (``layout``) at the x that ``table[t]``
+    gives for the box's centre: (centre x, pose x) pairs, the nearest centre's (nobody where the
+    frame's table is empty)."""
 
     layout = torch.stack([torch.linspace(-15, 15, 17).roll(5), torch.linspace(20, 100, 17)], -1)
 
-    def __init__(self, seen):
-        self.seen = seen
+    def __init__(self, table):
+        self.table = table
 
     def estimate_person(self, frames, boxes):
         from lit_boot.data.readers import PoseEstimates
@@ -230,15 +231,22 @@ class OnWhoeverIsThere:
         T = boxes.shape[0]
         kp, conf = torch.zeros(T, 17, 2), torch.zeros(T, 17)
         for t in range(T):
-            if boxes[t, 4] > 0 and self.seen[t]:
+            if boxes[t, 4] > 0 and self.table[t]:
                 centre = float(boxes[t, 0] + boxes[t, 2]) / 2
-                x = min(self.seen[t], key=lambda v: abs(v - centre))
+                _, x = min(self.table[t], key=lambda pair: abs(pair[0] - centre))
                 kp[t], conf[t] = self.layout + torch.tensor([x, 0.0]), 1.0
         return PoseEstimates(keypoints2d=kp, keypoints_conf=conf, keypoints_layout="coco17")
 
     def keep_frames(self, estimates, keep):
         return mask_frames(estimates, keep)
 
+
+class OnWhoeverIsThere(ByBoxCentre):
+    """An estimator whose crop shows the person whose pose centre is nearest the box's centre
+    among those in ``seen`` (per frame, the x of each visible person)."""
+
+    def __init__(self, seen):
+        super().__init__([[(x, x) for x in xs] for xs in seen])
 
 def test_a_pose_in_a_bridged_crop_counts_for_the_detection_that_gave_it():
     """A stands at x = 100 (a loose box); B walks across behind A, undetected in frame 2, where
@@ -312,29 +320,6 @@ def test_keep_frames_refits_any_estimates_the_crops_made():
     other = crops(frames).estimate_person(frames, a)  # made by another estimator: masked, nothing to refit
     masked = estimator.keep_frames(other, torch.tensor([True, False, True, True]))
     assert (masked.keypoints_conf[1] == 0).all() and masked.metadata["missing_frames"] == []
-
-
-class ByBoxCentre:
-    """An estimator whose crop shows a pose (OnWhoeverIsThere's layout) at the x that ``table[t]``
-    gives for the box's centre: (centre x, pose x) pairs, the nearest centre's."""
-
-    def __init__(self, table):
-        self.table = table
-
-    def estimate_person(self, frames, boxes):
-        from lit_boot.data.readers import PoseEstimates
-
-        T = boxes.shape[0]
-        kp, conf = torch.zeros(T, 17, 2), torch.zeros(T, 17)
-        for t in range(T):
-            if boxes[t, 4] > 0:
-                centre = float(boxes[t, 0] + boxes[t, 2]) / 2
-                _, x = min(self.table[t], key=lambda pair: abs(pair[0] - centre))
-                kp[t], conf[t] = OnWhoeverIsThere.layout + torch.tensor([x, 0.0]), 1.0
-        return PoseEstimates(keypoints2d=kp, keypoints_conf=conf, keypoints_layout="coco17")
-
-    def keep_frames(self, estimates, keep):
-        return mask_frames(estimates, keep)
 
 
 def test_a_pose_borrowed_from_the_person_in_front_counts_for_neither_track():
