@@ -14,11 +14,11 @@ that person, counted in ``metadata["people"][i]["not_theirs"]``). One pose, one 
 (:mod:`.pose_duplicates`): before tracking, a detection whose crop gives the same pose as another
 detection's in that frame, with a box that fits the pose worse (a box around two overlapping
 people beside a box of one of them), is dropped (counted in ``metadata["duplicate_detections"]``);
-after, a pose two tracks' crops both give counts for the track whose box there is a detection
+after, where two tracks' boxes overlap, a pose that looks like the other's (:mod:`.borrowed_poses`:
+the colours near its joints) counts for neither (``metadata["people"][i]["borrowed"]``), and then a
+pose two tracks' crops both give counts for the track whose box there is a detection
 rather than the tracker's guess across a gap (:func:`bridged_frames`), else for the one whose box
-fits it best (the other's frames counted in ``metadata["people"][i]["duplicates"]``). Where two
-people's boxes overlap, a pose that looks like the other's (:mod:`.borrowed_poses`: the colours near
-its joints) counts for neither (``metadata["people"][i]["borrowed"]``). A track on which no pose is
+fits it best (the other's frames counted in ``metadata["people"][i]["duplicates"]``). A track on which no pose is
 found in any frame is left out (``metadata["people_without_pose"]``). The frames where a person's id may have switched
 (:func:`~.id_checks.frames_to_check`) are listed in ``metadata["people"][i]["check_ids"]`` (video frame numbers).
 Person 0 (the main person) is the most prominent track with a pose; track ids number the tracks by prominence.
@@ -195,11 +195,11 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
     looks = detection_looks(frames, detections, keypoints)
     tracks = select_people(track_people(detections, keypoints=keypoints, looks=looks), people)
     found = [_one_person(estimator, frames, boxes) for boxes in tracks]
-    keypoints, conf = [est.keypoints2d for est, _ in found], [est.keypoints_conf for est, _ in found]
-    borrowed = borrowed_frames(frames, keypoints, conf, list(tracks), MAX_LOOK)  # a neighbour's pose in one's crop
-    conf = [c * ~lent[:, None] for c, lent in zip(conf, borrowed)]
+    track_kp, track_conf = [est.keypoints2d for est, _ in found], [est.keypoints_conf for est, _ in found]
+    borrowed = borrowed_frames(frames, track_kp, track_conf, list(tracks), MAX_LOOK)  # a neighbour's pose in one's crop
+    track_conf = [c * ~lent[:, None] for c, lent in zip(track_conf, borrowed)]
     bridged = [bridged_frames(boxes, detections) for boxes in tracks]
-    duplicates = duplicate_frames(keypoints, conf, list(tracks), bridged)
+    duplicates = duplicate_frames(track_kp, track_conf, list(tracks), bridged)
     estimates, records = [], []
     for track_id, (boxes, (est, not_theirs), twice, lent) in enumerate(zip(tracks, found, duplicates, borrowed)):
         est = estimator.keep_frames(est, ~(twice | lent)) if bool((twice | lent).any()) else est
