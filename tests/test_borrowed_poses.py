@@ -1,6 +1,7 @@
 """A borrowed pose (lit_boot.estimate.borrowed_poses): where two people's boxes overlap, a pose on
 one's track whose look is the other's is dropped; frames painted in known colours."""
 
+import pytest
 import torch
 
 from lit_boot.estimate.borrowed_poses import borrowed_frames
@@ -64,3 +65,9 @@ def test_a_person_never_seen_clear_keeps_a_pose_in_its_own_colours_only():
     out = borrowed_frames(frames, [a_kp, b_kp], [a_conf, b_conf], [a_box, b_box], MAX_LOOK)
     assert out[0].tolist() == [False] * 4
     assert out[1].tolist() == [False, False, True, False]
+
+
+def test_frames_other_than_uint8_rgb_are_refused_by_name():
+    (kp, conf), box = pose([20.0] * T), boxes([20.0] * T)
+    with pytest.raises(ValueError, match="uint8 RGB"):
+        borrowed_frames(painted([]).float() / 255, [kp, kp], [conf, conf], [box, box])

@@ -19,7 +19,8 @@ from collections.abc import Sequence
 
 import torch
 
-from .looks import joint_look, look_distance
+from .looks import check_rgb_frames, joint_look, look_distance
+from .people_track import MAX_LOOK
 from .track_cost import box_side, iou_matrix
 
 __all__ = ["borrowed_frames", "MARGIN", "OVERLAP"]
@@ -51,11 +52,12 @@ def _overlaps(boxes: Sequence[torch.Tensor]) -> torch.Tensor:
 
 
 def borrowed_frames(frames: torch.Tensor, keypoints: Sequence[torch.Tensor], confidence: Sequence[torch.Tensor],
-                    boxes: Sequence[torch.Tensor], max_look: float) -> list[torch.Tensor]:  # fmt: skip
+                    boxes: Sequence[torch.Tensor], max_look: float = MAX_LOOK) -> list[torch.Tensor]:  # fmt: skip
     """For P people in frames (T, 3, H, W) uint8 RGB, each one's keypoints (T, K, 2) px,
     confidences (T, K) (0: no pose) and boxes (T, 5): per person a (T,) bool of the frames whose
     pose is another overlapping person's (module docstring; ``max_look``: the distance within which
     a person without an own look is taken to show another's)."""
+    check_rgb_frames(frames)
     P = len(keypoints)
     out = [torch.zeros(frames.shape[0], dtype=torch.bool) for _ in range(P)]
     if P < 2:

@@ -18,7 +18,7 @@ import torch
 
 from .track_cost import KEYPOINT_CONF, KEYPOINT_MIN_JOINTS, box_side
 
-__all__ = ["LOOK_BINS", "LOOK_RADIUS", "joint_look", "detection_looks", "look_distance"]
+__all__ = ["LOOK_BINS", "LOOK_RADIUS", "joint_look", "detection_looks", "look_distance", "check_rgb_frames"]
 
 #: Bins per RGB channel of a look's histogram.
 LOOK_BINS = 4
@@ -49,12 +49,18 @@ def joint_look(frame: torch.Tensor, keypoints: torch.Tensor, side: float) -> tor
     return counts.float() / counts.sum()
 
 
+def check_rgb_frames(frames: torch.Tensor) -> None:
+    """Raise ValueError unless frames are (T, 3, H, W) uint8 RGB (colours in [0, 1] would all fall
+    in one bin, and every look would match)."""
+    if frames.dtype != torch.uint8 or frames.ndim != 4 or frames.shape[1] != 3:
+        raise ValueError(f"frames: expected (T, 3, H, W) uint8 RGB, got {tuple(frames.shape)} {frames.dtype}")
+
+
 def detection_looks(frames: torch.Tensor, detections: Sequence[torch.Tensor],
                     keypoints: Sequence[torch.Tensor]) -> list[torch.Tensor]:  # fmt: skip
     """Each detection's look: per frame (N_t, LOOK_BINS**3), from frames (T, 3, H, W) uint8 RGB,
     the detections (N_t, 5) x0, y0, x1, y1 px, score and their keypoints (N_t, K, 3)."""
-    if frames.dtype != torch.uint8 or frames.ndim != 4 or frames.shape[1] != 3:
-        raise ValueError(f"frames: expected (T, 3, H, W) uint8 RGB, got {tuple(frames.shape)} {frames.dtype}")
+    check_rgb_frames(frames)
     return [torch.stack([joint_look(frame, kp, float(box_side(box))) for box, kp in zip(dets, kps)])
             if dets.shape[0] else torch.zeros(0, LOOK_BINS**3)
             for frame, dets, kps in zip(frames, detections, keypoints)]  # fmt: skip

@@ -38,7 +38,7 @@ from ..data.readers.pose_file import PoseEstimates
 from .borrowed_poses import borrowed_frames
 from .id_checks import frames_to_check
 from .looks import detection_looks
-from .people_track import MAX_LOOK, select_people, track_people
+from .people_track import select_people, track_people
 from .pose_duplicates import duplicate_detections, duplicate_frames
 from .tracking import body_box
 
@@ -196,7 +196,7 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
     tracks = select_people(track_people(detections, keypoints=keypoints, looks=looks), people)
     found = [_one_person(estimator, frames, boxes) for boxes in tracks]
     track_kp, track_conf = [est.keypoints2d for est, _ in found], [est.keypoints_conf for est, _ in found]
-    borrowed = borrowed_frames(frames, track_kp, track_conf, list(tracks), MAX_LOOK)  # a neighbour's pose in one's crop
+    borrowed = borrowed_frames(frames, track_kp, track_conf, list(tracks))  # a neighbour's pose in one's crop
     track_conf = [c * ~lent[:, None] for c, lent in zip(track_conf, borrowed)]
     bridged = [bridged_frames(boxes, detections) for boxes in tracks]
     duplicates = duplicate_frames(track_kp, track_conf, list(tracks), bridged)
