@@ -29,7 +29,8 @@ seen pixels' extent wherever at least --min-pixels are seen, score 1: a detector
 merges two people nor misses one), so that what is left is the pose estimator's and the
 tracker's; everything else as above.
 
-The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, the
+The first line names the installed versions of the packages the counts move with (another install gave
+other counts for the same code: BENCHMARKS.md, "A borrowed pose"). The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, the
 returned people that cover nobody, and the frames with a pose on a true person and those poses' switches,
 by kind (:func:`switch_kinds`; ``--why`` prints each one), and how many of those switches lie in the frames
 the product marks to check (:func:`checked`), which are so many of the returned people's frames with a pose.
@@ -192,6 +193,21 @@ def checked(posed: list, owners: list[list[int | None]]) -> tuple[int, int, int]
     return caught, sum(int((m & f).sum()) for m, f in zip(marks, found)), sum(int(f.sum()) for f in found)
 
 
+def package_versions() -> str:
+    """The versions these counts move with (BENCHMARKS.md, "A borrowed pose": the crops are resized by
+    OpenCV, and another install gave other counts for the same code)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    names = ("torch", "mediapipe", "onnxruntime", "opencv-python-headless", "opencv-contrib-python", "numpy")
+    found = []
+    for name in names:
+        try:
+            found.append(f"{name} {version(name)}")
+        except PackageNotFoundError:
+            found.append(f"{name} absent")
+    return ", ".join(found)
+
+
 def main() -> None:
     parser = scene_parser(__doc__.splitlines()[0])
     parser.add_argument("--height", type=int, default=256)
@@ -211,6 +227,7 @@ def main() -> None:
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     detector = PersonDetector(args.detector, score=args.det_score, iou=args.det_iou)
+    print(f"packages: {package_versions()}")
     print("| scene | true person: visible frames, covered, identity switches (pose: frames, switches) "
           "| people returned (false) | s |")  # fmt: skip
     print("| --- | --- | --- | --- |")
@@ -251,7 +268,8 @@ def main() -> None:
           f"({', '.join(f'{k} {v}' for k, v in sorted(kinds.items()))}); in the frames marked to check "
           f"{marked[0]}, marked {marked[1]} of {marked[2]} frames with a pose")
     if args.json:
-        Path(args.json).write_text(json.dumps({"settings": vars(args), "scenes": out}, indent=1))
+        Path(args.json).write_text(json.dumps({"settings": vars(args), "packages": package_versions(), "scenes": out},
+                                              indent=1))
 
 
 if __name__ == "__main__":
