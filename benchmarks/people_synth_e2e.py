@@ -29,8 +29,9 @@ seen pixels' extent wherever at least --min-pixels are seen, score 1: a detector
 merges two people nor misses one), so that what is left is the pose estimator's and the
 tracker's; everything else as above.
 
-The first line names the installed versions of the packages the counts move with (another install gave
-other counts for the same code: BENCHMARKS.md, "A borrowed pose"). The last line sums the scenes: identity switches (over clear frames), the true people's mean covered share, the
+The first line names the installed versions of the packages the counts move with (another install
+gave other counts for the same code: BENCHMARKS.md, "A borrowed pose"). The last line sums the
+scenes: identity switches (over clear frames), the true people's mean covered share, the
 returned people that cover nobody, and the frames with a pose on a true person and those poses' switches,
 by kind (:func:`switch_kinds`; ``--why`` prints each one), and how many of those switches lie in the frames
 the product marks to check (:func:`checked`), which are so many of the returned people's frames with a pose.
