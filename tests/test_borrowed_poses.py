@@ -6,8 +6,9 @@ import torch
 
 from lit_boot.estimate.borrowed_poses import borrowed_frames
 from lit_boot.estimate.people_track import MAX_LOOK
+from test_looks import BLUE, RED, pose_at
 
-RED, BLUE, GREEN = (230, 20, 20), (20, 20, 230), (20, 230, 20)
+GREEN = (20, 230, 20)
 T, H, W = 4, 60, 120
 
 
@@ -20,9 +21,9 @@ def painted(regions) -> torch.Tensor:
 
 
 def pose(xs: list[float]) -> tuple[torch.Tensor, torch.Tensor]:
-    """One person's keypoints (T, 6, 2) at x = xs[t] (a vertical line of 6 joints) and confidence (T, 6)."""
-    kp = torch.stack([torch.tensor([[x, 10.0 + 6 * k] for k in range(6)]) for x in xs])
-    return kp, torch.full((T, 6), 0.9)
+    """One person's keypoints (T, 6, 2) at x = xs[t] (test_looks' vertical line of 6 joints) and confidence (T, 6)."""
+    kp = torch.stack([pose_at(x, 10.0) for x in xs])
+    return kp[..., :2].clone(), kp[..., 2].clone()
 
 
 def boxes(xs: list[float]) -> torch.Tensor:
