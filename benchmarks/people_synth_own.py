@@ -12,6 +12,8 @@ the poses' switches on the true people (``people_synth_e2e.pose_switches``; 0 wi
 Scenes: make_scene(people=N, frames=--frames, --height x --width, seed, motion by the seed's place
 in --seeds, as benchmarks/people_synth_e2e.py).
 
+The first line names the installed versions the estimates move with (as people_synth_e2e.py's).
+
 Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_own.py [--mode 2d|3d] [--people 2,3]
            [--seeds 30,31,32,33] [--frames 8] [--height 256] [--width 512]
            [--weights ../shared/checkpoints/raft-small.pth] [--out /tmp/people_synth_own] [--json out.json]
@@ -33,7 +35,7 @@ from lit_boot.core.people import Person
 from lit_boot.estimate import PersonDetector, estimate_poses
 from lit_boot.synth import make_scene
 from people_synth import changes, masks
-from people_synth_e2e import pose_owners, pose_switches, visible_boxes
+from people_synth_e2e import package_versions, pose_owners, pose_switches, visible_boxes
 from people_synth_tracking import MOTIONS, scene_parser, true_people
 from real_data import SHARED
 
@@ -107,6 +109,7 @@ def main() -> None:
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     detector = PersonDetector(args.detector)
+    print(f"packages: {package_versions()}")
     rows = []
     for n in (int(v) for v in args.people.split(",")):
         for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
@@ -129,7 +132,8 @@ def main() -> None:
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     if args.json:
-        Path(args.json).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
+        Path(args.json).write_text(json.dumps({"settings": vars(args), "packages": package_versions(), "rows": rows},
+                                              indent=1))
 
 
 if __name__ == "__main__":
