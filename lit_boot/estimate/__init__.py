@@ -7,11 +7,13 @@ the conversions in :mod:`.world_to_lsp` and :mod:`.tracking` need no MediaPipe.
 
 ``PersonDetector(model="yolox_nano").detect_frames(frames)`` gives each frame's person boxes
 (YOLOX through onnxruntime, which the same extra installs and which is imported only when a
-detector is built); ``main_person_boxes(detections)`` follows one person over the frames, and
-``person_boxes(frames, "yolox_nano")`` does both (``estimate_poses(..., detector=...)`` adds them
-to the estimates: the region the method zooms on). ``track_people(detections)`` follows every
-person (ids kept through crossings; with ``looks=detection_looks(frames, detections, keypoints)``,
-the colours near each pose's joints, a person hidden for long is found again), and
+detector is built; another detector plugs in wherever a detector is taken as a
+:class:`PersonBoxDetector`, any object with that ``detect_frames``); ``main_person_boxes(detections)``
+follows one person over the frames, and ``person_boxes(frames, "yolox_nano")`` does both
+(``estimate_poses(..., detector=...)`` adds them to the estimates: the region the method zooms on).
+``track_people(detections)`` follows every person (ids kept through crossings; with
+``looks=detection_looks(frames, detections, keypoints)``, the colours near each pose's joints, a
+person hidden for long is found again), and
 ``estimate_poses(..., people="all")`` gives each tracked person a pose, top-down (the main person
 first, the others in ``PoseEstimates.others``).
 ``estimate_people(estimator, frames, detector, people)`` runs any top-down
@@ -27,6 +29,7 @@ from .detector import (
     ORT_INSTALL_HINT,
     PERSON_CLASS,
     OnnxRuntimeUnavailable,
+    PersonBoxDetector,
     PersonDetector,
     decode_yolox,
     import_onnxruntime,
@@ -96,6 +99,7 @@ __all__ = [
     "PERSON_CLASS",
     "OnnxRuntimeUnavailable",
     "PersonDetector",
+    "PersonBoxDetector",
     "decode_yolox",
     "import_onnxruntime",
     "letterbox",

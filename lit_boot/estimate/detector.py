@@ -16,6 +16,8 @@ Boxes are in the original frame's pixels with pixel centres at integer coordinat
 in lit-boot: a box covering the pixel columns a..b has x0 = a - 0.5 and x1 = b + 0.5 (x1 - x0 is
 its width in pixels), and boxes are clipped to the frame, [-0.5, W - 0.5] x [-0.5, H - 0.5].
 onnxruntime is part of the ``mediapipe`` extra and is imported only when a detector is built.
+Another person detector plugs in through :class:`PersonBoxDetector` (one method); :func:`as_detector`
+takes either, or a YOLOX model path or name.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import logging
 import os
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
@@ -38,6 +40,9 @@ __all__ = [
     "YOLOX_STRIDES",
     "OnnxRuntimeUnavailable",
     "PersonDetector",
+    "PersonBoxDetector",
+    "as_detector",
+    "detector_name",
     "decode_yolox",
     "import_onnxruntime",
     "letterbox",
@@ -273,3 +278,26 @@ class PersonDetector:
         seconds = time.perf_counter() - start
         log.debug("detected people in %d frames (%.3f s per frame)", len(out), seconds / max(1, len(out)))
         return out
+
+
+class PersonBoxDetector(Protocol):
+    """What lit-boot needs of a person detector (the protocol another detector implements to plug
+    in; :class:`PersonDetector` is the built-in one): ``detect_frames(frames)``, frames (T, 3, H, W)
+    uint8 RGB, gives one tensor (N_t, 5) per frame, x0, y0, x1, y1 px (pixel centres at integer
+    coordinates, module docstring) and a score in 0..1; (0, 5) where nobody is found."""
+
+    def detect_frames(self, frames: torch.Tensor) -> list[torch.Tensor]: ...
+
+
+def as_detector(detector: Any, default: str | os.PathLike = "yolox_nano") -> PersonBoxDetector:
+    """``detector`` itself where it has a ``detect_frames`` method (a :class:`PersonBoxDetector`),
+    else a :class:`PersonDetector` of that YOLOX model path or name (``default`` where None)."""
+    if callable(getattr(detector, "detect_frames", None)):
+        return detector
+    return PersonDetector(default if detector is None else detector)
+
+
+def detector_name(detector: PersonBoxDetector) -> str:
+    """What a run's metadata records of a detector: its model file, else its class name."""
+    path = getattr(detector, "path", None)
+    return str(path) if path is not None else type(detector).__name__

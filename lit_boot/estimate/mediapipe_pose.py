@@ -239,7 +239,8 @@ def estimate_poses(
     video file / folder of frames (read with ``read_video(path, stride, max_frames, resize)``;
     ``stride``, ``max_frames`` and ``resize`` apply to paths only). Keypoints are in pixels of
     the frames MediaPipe saw (``image_size``). With a ``detector`` (a YOLOX model path or name,
-    e.g. ``"yolox_nano"``, or a :class:`~.detector.PersonDetector`) the main person's box in
+    e.g. ``"yolox_nano"``, a :class:`~.detector.PersonDetector`, or any other
+    :class:`~.detector.PersonBoxDetector`: an object with ``detect_frames``) the main person's box in
     every frame is found too (``person_boxes``; :func:`~.person_track.person_boxes`): the
     region the method spends resolution on, also where MediaPipe misses the person. There, with
     ``crops``, MediaPipe runs again on crops around the box, enlarged and upsampled
@@ -270,12 +271,12 @@ def estimate_poses(
             "seconds_per_frame": float(raw["seconds"].mean())}  # fmt: skip
     boxes = None
     if detector is not None:
-        from .detector import PersonDetector
+        from .detector import as_detector, detector_name
         from .person_track import person_boxes
 
-        detector = detector if isinstance(detector, PersonDetector) else PersonDetector(detector)
+        detector = as_detector(detector)
         boxes = person_boxes(video, detector)
-        meta.update({"detector": str(detector.path), "detector_found": int((boxes[:, 4] > 0).sum())})
+        meta.update({"detector": detector_name(detector), "detector_found": int((boxes[:, 4] > 0).sum())})
         if crops:
             raw = _with_crops(mp, raw, video, boxes, model_complexity, min_detection_confidence, meta)
     est = poses_from_landmarks(
@@ -289,12 +290,12 @@ def estimate_poses(
 def _people(mp: Any, frames: torch.Tensor, frame_indices: torch.Tensor | None, people: str | int, detector: Any,
             model_complexity: int, min_detection_confidence: float, max_jump: float, on_jump: str) -> PoseEstimates:  # fmt: skip
     """Every tracked person's pose, top-down (:func:`~.people_pose.estimate_people`)."""
-    from .detector import PersonDetector
+    from .detector import as_detector, detector_name
     from .people_pose import MediaPipeCrops, estimate_people
     from .people_track import parse_people
 
     people = parse_people(people)
-    detector = detector if isinstance(detector, PersonDetector) else PersonDetector(detector or "yolox_nano")
+    detector = as_detector(detector)
     source, size = f"mediapipe-{mp.__version__}", tuple(frames.shape[2:])
 
     def assemble(landmarks, confidence, world, found):
@@ -302,7 +303,7 @@ def _people(mp: Any, frames: torch.Tensor, frame_indices: torch.Tensor | None, p
                                     on_jump=on_jump, source=source)  # fmt: skip
 
     meta = {"model_complexity": model_complexity, "min_detection_confidence": min_detection_confidence,
-            "mediapipe_version": mp.__version__, "detector": str(detector.path), "mode": "top-down, static crops"}
+            "mediapipe_version": mp.__version__, "detector": detector_name(detector), "mode": "top-down, static crops"}
     with _pose_solution(mp, model_complexity, min_detection_confidence, 0.5, static_image_mode=True) as pose:
         return estimate_people(MediaPipeCrops(pose, assemble), frames, detector, people, meta)
 

@@ -39,6 +39,7 @@ from .borrowed_poses import borrowed_frames
 from .id_checks import frames_to_check
 from .looks import detection_looks
 from .people_track import select_people, track_people
+from .person_track import frame_detections
 from .pose_duplicates import duplicate_detections, duplicate_frames
 from .tracking import body_box
 
@@ -183,11 +184,12 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
     """Every tracked person's estimates in frames (T, 3, H, W) uint8 RGB (module docstring).
 
     ``estimator``: a :class:`PersonPoseEstimator` (e.g. :class:`MediaPipeCrops`); ``detector``:
-    anything with ``detect_frames(frames)`` -> per-frame boxes (N_t, 5), as
-    :class:`~.detector.PersonDetector`; ``meta``: the run's own metadata, merged into the main
-    person's. Returns the main person's estimates with the others in ``others``; with no pose
-    found, the confidences are 0 everywhere (and the most prominent track's boxes are kept, if any)."""
-    detections = [torch.as_tensor(d, dtype=torch.float32).reshape(-1, 5) for d in detector.detect_frames(frames)]
+    a :class:`~.detector.PersonBoxDetector` (``detect_frames(frames)`` -> per-frame boxes (N_t, 5),
+    as :class:`~.detector.PersonDetector`; checked, :func:`~.person_track.frame_detections`);
+    ``meta``: the run's own metadata, merged into the main person's. Returns the main person's
+    estimates with the others in ``others``; with no pose found, the confidences are 0 everywhere
+    (and the most prominent track's boxes are kept, if any)."""
+    detections = frame_detections(detector, frames)
     keypoints = detection_keypoints(estimator, frames, detections)
     doubled = duplicate_detections(detections, keypoints)  # a box around two people beside one of theirs
     detections = [d[~drop] for d, drop in zip(detections, doubled)]

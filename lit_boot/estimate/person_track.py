@@ -75,6 +75,23 @@ def check_detections(detections: Sequence[torch.Tensor]) -> list[torch.Tensor]:
     return [d.detach().float().cpu() for d in detections]
 
 
+def frame_detections(detector: Any, frames: torch.Tensor) -> list[torch.Tensor]:
+    """``detector.detect_frames(frames)`` (a :class:`~.detector.PersonBoxDetector`) checked: one
+    (N_t, 5) float32 CPU tensor per frame (an empty frame's may be any empty array); ValueError
+    naming the detector and the frame where that is not what it gave."""
+    from .detector import detector_name
+
+    found = list(detector.detect_frames(frames))
+    if len(found) != frames.shape[0]:
+        raise ValueError(f"detector {detector_name(detector)}: expected boxes for each of the {frames.shape[0]} "
+                         f"frames, got {len(found)}")  # fmt: skip
+    found = [torch.as_tensor(d, dtype=torch.float32) for d in found]
+    try:
+        return check_detections([d.reshape(0, 5) if d.numel() == 0 else d for d in found])
+    except ValueError as err:
+        raise ValueError(f"detector {detector_name(detector)}: {err}") from None
+
+
 def main_person_boxes(
     detections: Sequence[torch.Tensor], *, max_gap: int = 3, max_jump: float = 0.5
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -114,12 +131,12 @@ def main_person_boxes(
 
 def person_boxes(frames: torch.Tensor, detector: Any) -> torch.Tensor:
     """The main person's box in every frame (T, 3, H, W) uint8 RGB: (T, 5) (x0, y0, x1, y1 px,
-    score: 1 where found or bridged, 0 and zeros where nobody). ``detector``: a
-    :class:`~.detector.PersonDetector`, or a YOLOX model (a path or a name such as
-    ``"yolox_nano"``, looked up like RAFT's weights) to build one with."""
-    from .detector import PersonDetector
+    score: 1 where found or bridged, 0 and zeros where nobody). ``detector``: any
+    :class:`~.detector.PersonBoxDetector` (:class:`~.detector.PersonDetector`, or another with
+    ``detect_frames``), or a YOLOX model (a path or a name such as ``"yolox_nano"``, looked up like
+    RAFT's weights) to build one with."""
+    from .detector import as_detector
 
-    if not isinstance(detector, PersonDetector):
-        detector = PersonDetector(detector)
-    boxes, found = main_person_boxes(detector.detect_frames(frames))
+    detector = as_detector(detector)
+    boxes, found = main_person_boxes(frame_detections(detector, frames))
     return torch.cat([boxes.float() * found[:, None], found[:, None].float()], dim=1)
