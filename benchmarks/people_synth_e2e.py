@@ -46,24 +46,24 @@ from pathlib import Path
 import torch
 from scipy.optimize import linear_sum_assignment
 
-from lit_boot.estimate import PersonDetector, estimate_poses, frames_to_check
+from lit_boot.estimate import PersonBoxDetector, PersonDetector, estimate_poses, frames_to_check
 from lit_boot.estimate.track_cost import iou_matrix
 from lit_boot.synth import make_scene
 from people_synth_tracking import MOTIONS, scene_parser, true_people
 from real_data import SHARED
 
 
-def returned_people(scene, detector: PersonDetector, **options) -> list:
+def returned_people(scene, detector: PersonBoxDetector, **options) -> list:
     """The people ``estimate_poses(scene.frames, people="all", detector=detector, **options)``
     returns with a pose in some frame (Person, each with its boxes), as a user's run gives them."""
     every = estimate_poses(scene.frames, people="all", detector=detector, **options)
     return [p for p in every.people() if p.person_boxes is not None and p.keypoints_conf.amax() > 0]
 
 
-class TrueBoxes(PersonDetector):
+class TrueBoxes:
     """A detector that returns one scene's true visible boxes (:func:`visible_boxes`), for
-    ``--true-boxes``: ``detect_frames`` gives per frame the boxes (N_t, 5) of the people seen,
-    in ``scene.people()`` order."""
+    ``--true-boxes`` (a :class:`lit_boot.estimate.PersonBoxDetector`): ``detect_frames`` gives per
+    frame the boxes (N_t, 5) of the people seen, in ``scene.people()`` order."""
 
     def __init__(self, boxes: torch.Tensor):  # boxes (P, T, 5); no model to load
         self.boxes, self.path = boxes, Path("true-boxes")
