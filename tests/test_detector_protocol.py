@@ -53,6 +53,8 @@ def test_a_detector_that_gives_the_wrong_boxes_is_named():
         frame_detections(Broken([torch.zeros(0, 5)]), frames)
     with pytest.raises(ValueError, match=r"detector broken.onnx: detections\[1\]: expected .*\(N, 5\).*got \(3, 4\)"):
         frame_detections(Broken([torch.zeros(0, 5), torch.zeros(3, 4)]), frames)
+    with pytest.raises(ValueError, match=r"detector broken.onnx: detections\[0\]: expected \(N, 5\) boxes.*got list"):
+        frame_detections(Broken([[[1.0, 2.0, 3.0, 4.0, 0.5], [1.0, 2.0]], []]), frames)  # ragged
 
 
 def test_a_model_path_still_builds_yolox(tmp_path):

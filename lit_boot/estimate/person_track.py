@@ -81,15 +81,21 @@ def frame_detections(detector: Any, frames: torch.Tensor) -> list[torch.Tensor]:
     naming the detector and the frame where that is not what it gave."""
     from .detector import detector_name
 
-    found = list(detector.detect_frames(frames))
+    name, found = detector_name(detector), list(detector.detect_frames(frames))
     if len(found) != frames.shape[0]:
-        raise ValueError(f"detector {detector_name(detector)}: expected boxes for each of the {frames.shape[0]} "
-                         f"frames, got {len(found)}")  # fmt: skip
-    found = [torch.as_tensor(d, dtype=torch.float32) for d in found]
+        raise ValueError(f"detector {name}: expected boxes for each of the {frames.shape[0]} frames, got {len(found)}")
+    boxes = []
+    for t, d in enumerate(found):
+        try:
+            d = torch.as_tensor(d, dtype=torch.float32)
+        except (TypeError, ValueError, RuntimeError) as err:
+            raise ValueError(f"detector {name}: detections[{t}]: expected (N, 5) boxes (x0, y0, x1, y1, score), "
+                             f"got {type(d).__name__}: {err}") from None  # fmt: skip
+        boxes.append(d.reshape(0, 5) if d.numel() == 0 else d)
     try:
-        return check_detections([d.reshape(0, 5) if d.numel() == 0 else d for d in found])
+        return check_detections(boxes)
     except ValueError as err:
-        raise ValueError(f"detector {detector_name(detector)}: {err}") from None
+        raise ValueError(f"detector {name}: {err}") from None
 
 
 def main_person_boxes(
