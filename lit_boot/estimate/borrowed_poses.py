@@ -21,7 +21,7 @@ import torch
 
 from .looks import check_rgb_frames, joint_look, look_distance
 from .people_track import MAX_LOOK
-from .track_cost import box_side, iou_matrix
+from .track_cost import box_overlaps, box_side
 
 __all__ = ["borrowed_frames", "MARGIN", "OVERLAP"]
 
@@ -41,16 +41,6 @@ def _looks(frames: torch.Tensor, keypoints: torch.Tensor, confidence: torch.Tens
     return out
 
 
-def _overlaps(boxes: Sequence[torch.Tensor]) -> torch.Tensor:
-    """(T, P, P) bool: the people whose boxes (each (T, 5)) overlap in each frame (IoU >= OVERLAP)."""
-    stacked = torch.stack(list(boxes), 1)  # (T, P, 5)
-    out = torch.stack([iou_matrix(b[:, :4], b[:, :4]) >= OVERLAP for b in stacked])
-    present = stacked[..., 4] > 0
-    out &= present[:, :, None] & present[:, None, :]
-    out &= ~torch.eye(stacked.shape[1], dtype=torch.bool)
-    return out
-
-
 def borrowed_frames(frames: torch.Tensor, keypoints: Sequence[torch.Tensor], confidence: Sequence[torch.Tensor],
                     boxes: Sequence[torch.Tensor], max_look: float = MAX_LOOK) -> list[torch.Tensor]:  # fmt: skip
     """For P people in frames (T, 3, H, W) uint8 RGB, each one's keypoints (T, K, 2) px,
@@ -63,7 +53,7 @@ def borrowed_frames(frames: torch.Tensor, keypoints: Sequence[torch.Tensor], con
     if P < 2:
         return out
     looks = [_looks(frames, keypoints[p], confidence[p], boxes[p]) for p in range(P)]
-    overlaps = _overlaps(boxes)
+    overlaps = box_overlaps(torch.stack(list(boxes)), OVERLAP)  # (T, P, P)
     own = []
     for p in range(P):
         clear = [look for look, over in zip(looks[p], overlaps[:, p]) if look is not None and not bool(over.any())]

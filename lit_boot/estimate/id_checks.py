@@ -25,7 +25,7 @@ import torch
 from ..core.frame_runs import frame_runs
 from ..core.people import Person
 from .pose_duplicates import keypoint_extent
-from .track_cost import iou_matrix
+from .track_cost import box_overlaps
 
 __all__ = ["frames_to_check", "frame_ranges", "checks_line", "scene_checks", "OVERLAP_IOU"]
 
@@ -57,11 +57,7 @@ def frames_to_check(people: Sequence[Person], min_iou: float = OVERLAP_IOU) -> l
     if not people:
         return []
     boxes = torch.stack([_boxes(p) for p in people])  # (P, T, 5)
-    present = boxes[..., 4] > 0
-    overlap = torch.zeros(present.shape, dtype=torch.bool)  # (P, T): a box overlapping another's
-    for t in range(boxes.shape[1]):
-        iou = iou_matrix(boxes[:, t, :4], boxes[:, t, :4]).fill_diagonal_(0.0) * present[None, :, t]
-        overlap[:, t] = present[:, t] & (iou.amax(1) >= min_iou)
+    overlap = box_overlaps(boxes, min_iou).any(-1).T  # (P, T): a box overlapping another's
     out = []
     for i, person in enumerate(people):
         if person.keypoints_conf is None:

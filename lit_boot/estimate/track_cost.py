@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-__all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "iou_matrix", "MISS_COST", "SMOOTHING",
-           "KEYPOINT_WEIGHT"]
+__all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "iou_matrix", "box_overlaps", "MISS_COST",
+           "SMOOTHING", "KEYPOINT_WEIGHT"]
 
 #: The cost of leaving a track or a detection unmatched in a frame (the box terms of a pair lie in [0, 2]).
 MISS_COST = 1.0
@@ -138,6 +138,15 @@ def iou_matrix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     inter = (hi - lo).clamp_min(0).prod(-1)
     area = lambda x: (x[:, 2:4] - x[:, :2]).clamp_min(0).prod(-1)  # noqa: E731
     return inter / (area(a)[:, None] + area(b)[None, :] - inter).clamp_min(1e-9)
+
+
+def box_overlaps(boxes: torch.Tensor, min_iou: float) -> torch.Tensor:
+    """(T, P, P) bool: in each frame, the pairs of distinct people whose boxes (P, T, 5) (score 0:
+    absent) are both there and overlap by IoU ``min_iou`` or more."""
+    by_frame = boxes.transpose(0, 1)  # (T, P, 5)
+    out = torch.stack([iou_matrix(b[:, :4], b[:, :4]) >= min_iou for b in by_frame])
+    present = by_frame[..., 4] > 0
+    return out & present[:, :, None] & present[:, None, :] & ~torch.eye(boxes.shape[0], dtype=torch.bool)
 
 
 def _keypoint_distance(tracks: list[TrackState], t: int, keypoints: torch.Tensor,
