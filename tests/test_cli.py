@@ -81,7 +81,7 @@ def run_cli(*args, cwd=None, env=None):
 
 @pytest.mark.parametrize("argv", [[], ["--help"], ["demo", "--help"], ["estimate-pose", "--help"],
                                   ["import", "--help"], ["synth", "--help"], ["bootstrap", "--help"],
-                                  ["report", "--help"]])  # fmt: skip
+                                  ["report", "--help"], ["ids", "--help"]])  # fmt: skip
 def test_import_and_help_load_no_heavy_module(argv):
     code = ("import sys\nfrom lit_boot.cli import main\nimport lit_boot\n"
             f"try:\n    main({argv!r})\nexcept SystemExit as e:\n    assert e.code == 0, e.code\n"

@@ -17,7 +17,7 @@ from matplotlib import colormaps
 
 from ..core import Scene
 from ..core.joints import JointLayout, get_layout
-from ..data.visualize import draw_skeleton, flow_image
+from ..data.visualize import OTHER_COLOURS, OTHER_RGB, draw_skeleton, flow_image
 from .decisions import decision_map
 
 __all__ = ["overlay_frames", "flow_colour_scale", "video_fps", "change_image", "draw_poses", "resize_image",
@@ -29,11 +29,6 @@ ERROR_PERCENTILE = 99.0  # of |EPE change| over valid pixels: the error map's sc
 _SAMPLES = 1_000_000  # percentiles from at most about this many values per array
 _INVALID = 128  # grey where a map is not defined (no GT flow; a warp leaving the image)
 CHANGE_CMAP = "Purples"  #: |refined - RAFT| px: white unchanged, dark purple at the scale
-
-
-#: The other people's skeleton colours, one per track (names and RGB for the legend).
-OTHER_COLOURS = ("deepskyblue", "orange", "magenta", "yellow", "cyan", "white")
-OTHER_RGB = ((0, 191, 255), (255, 165, 0), (255, 0, 255), (255, 255, 0), (0, 255, 255), (255, 255, 255))
 
 
 def video_fps(num_frames: int, source_fps: float, seconds: float = 5.0, slowest: float = 2.0) -> float:

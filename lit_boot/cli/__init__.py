@@ -8,6 +8,8 @@ Commands, one module per group (each imported only when one of its commands runs
 - ``lit-boot import {sintel,3dpw,h36m,video} ... --out DIR`` and ``lit-boot estimate-pose VIDEO
   --out poses.npz`` (:mod:`.importing`): a dataset scene or a video (with a pose file, or
   MediaPipe poses) into a scene folder; MediaPipe Pose on a video to a pose file.
+- ``lit-boot ids SCENE_OR_POSES [--sheet ids.png] [--fix "swap 1 2 at 7-" --out FIXED]``
+  (:mod:`.ids`): the frames where a person's id may have switched, drawn; a copy with ids fixed.
 - ``lit-boot bootstrap --config configs/bootstrap.yaml --data.scene DIR [--out RUN]`` (or
   ``--data.video VIDEO``) and ``lit-boot demo`` (:mod:`.runs`): the whole method (flow -> pose
   -> flow) on one scene, resumed when rerun; the demo on a small synthetic scene.
@@ -79,6 +81,7 @@ COMMANDS: dict[str, Command] = {
                       "write report.html for a finished run (or a dataset run): did the video get better, and where"),
     "estimate-pose": Command("importing", "estimate_pose",
                              "MediaPipe Pose on a video: 2D keypoints, 3D joints and cameras to a pose file"),
+    "ids": Command("ids", "ids", "check the people's ids of a scene or pose file (frames to look at, a sheet) and fix them"),
     "fit": _lightning("train one stage's model (FlowTTT, PoseRefiner, ...) on one scene"),
     "validate": _lightning("evaluate one stage's model on one scene without training"),
     "predict": _lightning("write one stage's predictions (e.g. flow files) for one scene"),

@@ -18,9 +18,14 @@ from ..core.joints import JointLayout, get_layout
 from ..core.scene import Scene
 from .atomic import atomic_write_bytes
 
-__all__ = ["draw_skeleton", "flow_image", "read_png", "scene_preview", "write_png"]
+__all__ = ["draw_skeleton", "flow_image", "read_png", "scene_preview", "write_png", "OTHER_COLOURS", "OTHER_RGB"]
 
 Color = str | tuple[int, int, int]
+
+#: The other people's skeleton colours, one per track in the scene's order of people (the main
+#: person is drawn in lime), as names and RGB (the overlay video's, the id sheet's).
+OTHER_COLOURS = ("deepskyblue", "orange", "magenta", "yellow", "cyan", "white")
+OTHER_RGB = ((0, 191, 255), (255, 165, 0), (255, 0, 255), (255, 255, 0), (0, 255, 255), (255, 255, 255))
 
 
 def flow_image(flow: torch.Tensor, max_magnitude: float | None = None) -> torch.Tensor:

@@ -22,7 +22,9 @@ keep)``; MediaPipe's is :class:`MediaPipeCrops`) on every tracked person; where 
 boxes overlap, a pose whose look is the other's counts for neither (``borrowed_frames``).
 ``read_tracked_estimates(path)`` reads every person of an external COCO keypoint or DCPose file,
 linked into tracks by the file's track ids or by the same tracker. ``frames_to_check(people)``
-marks, per person, the frames where its id may have switched (people overlapping, or found again).
+marks, per person, the frames where its id may have switched (people overlapping, or found again);
+``id_sheet(frames, people, layout)`` draws those frames with every person named, and
+``fix_ids(people, ["swap 1 2 at 7-", ...])`` mends what a user saw there (``lit-boot ids``).
 """
 
 from .detector import (
@@ -54,6 +56,8 @@ from .mediapipe_pose import (
 )
 from .borrowed_poses import borrowed_frames
 from .id_checks import checks_line, frame_ranges, frames_to_check, scene_checks
+from .id_fixes import FIX_GRAMMAR, IdFix, fix_ids, parse_fix
+from .id_sheet import id_sheet, sheet_rows
 from .keypoint_tracks import link_keypoint_people, read_tracked_estimates
 from .looks import detection_looks, look_distance
 from .people_pose import (
@@ -122,6 +126,12 @@ __all__ = [
     "frame_ranges",
     "checks_line",
     "scene_checks",
+    "FIX_GRAMMAR",
+    "IdFix",
+    "fix_ids",
+    "parse_fix",
+    "id_sheet",
+    "sheet_rows",
     "person_boxes",
     "JUMP_POLICIES",
     "drop_jumps",
