@@ -206,7 +206,21 @@ def package_versions() -> str:
             found.append(f"{name} {version(name)}")
         except PackageNotFoundError:
             found.append(f"{name} absent")
-    return ", ".join(found)
+    return ", ".join(found) + f"; cpu: {cpu_name()}"
+
+
+def cpu_name() -> str:
+    """The CPU's model name and the vector extensions TFLite's and onnxruntime's kernels choose by
+    (another machine gave other counts with the same versions: BENCHMARKS.md, "Ids fixed by hand")."""
+    import platform
+
+    try:
+        info = open("/proc/cpuinfo").read()
+    except OSError:
+        return platform.processor() or "unknown"
+    model = next((line.split(":", 1)[1].strip() for line in info.splitlines() if line.startswith("model name")), "?")
+    flags = set(next((line.split(":", 1)[1].split() for line in info.splitlines() if line.startswith("flags")), []))
+    return f"{model} ({', '.join(f for f in ('avx2', 'avx512f', 'amx_tile') if f in flags) or 'no avx2'})"
 
 
 def main() -> None:

@@ -165,7 +165,7 @@ def test_the_command_fixes_a_copy_and_draws_the_sheet(crossing, tmp_path, capsys
     before = digest(tmp_path / "scene")
     assert main(["ids", str(tmp_path / "scene")]) == 0
     out = capsys.readouterr().out
-    assert f"3 people (frames with them): {a} (8)" in out and "ids to check" in out
+    assert f"3 people (frames with them): {a} (8)" in out and "ids to check" in out and "--fix" in out
     args = ["ids", str(tmp_path / "scene"), "--fix", f"swap {a} {b} at 4-", "--out", str(tmp_path / "fixed"),
             "--sheet", str(tmp_path / "ids.png")]  # fmt: skip
     assert main(args) == 0

@@ -29,9 +29,9 @@ def ids_parser() -> ArgumentParser:
     parser.add_argument("input", type=Path, help="a scene folder (lit-boot import) or a pose file (.npz or .json)")
     parser.add_argument("--fix", type=str, action="append", default=[], help=_FIX_HELP)
     parser.add_argument("--out", type=Path | None, default=None,
-                        help="where the fixed copy goes: a new scene folder, or a pose file (.npz or .json)")  # fmt: skip
+                        help="where the fixed copy goes: a new scene folder, or a pose file (.npz, .json)")
     parser.add_argument("--sheet", type=Path | None, default=None,
-                        help="a PNG of the frames to check (after the fixes), every person named (scene folders)")  # fmt: skip
+                        help="a PNG of the frames to check (after the fixes), each person named (scene folders)")
     parser.add_argument("--overwrite", type=bool, nargs="?", const=True, default=False, help="replace --out")
     return parser
 
@@ -95,6 +95,9 @@ def ids(argv: list[str]) -> int:
     line = checks_line([(p.track_id, [numbers[t] for t in m.nonzero().flatten().tolist()])
                         for p, m in zip(people, marks)])  # fmt: skip
     print(line or "no frame to check")
+    if line and not args.fix:
+        print(f"  look at them (--sheet ids.png draws them), then: lit-boot ids {args.input} --fix \"swap A B at "
+              f"FRAMES\" --out NEW (swap, join, split, drop: lit-boot ids --help)")  # fmt: skip
     if args.out is not None:
         if is_scene:
             save_scene(item, args.out, overwrite=args.overwrite)

@@ -125,12 +125,12 @@ class _Rows:
                 self.arrays["cameras_crops"] = person.cameras.crops.clone()
         self.touched = torch.zeros(next(iter(self.arrays.values())).shape[0], dtype=torch.bool)
 
-    def empty_like(self, track_id: int) -> _Rows:
-        """A person of ``track_id`` with the same fields, absent in every frame."""
+    def copy(self, track_id: int | None = None, empty: bool = False) -> _Rows:
+        """A copy (of ``track_id`` if given); ``empty``: absent in every frame, every frame touched."""
         out = _Rows.__new__(_Rows)
-        out.track_id, out.cameras = track_id, self.cameras
-        out.arrays = {key: torch.zeros_like(value) for key, value in self.arrays.items()}
-        out.touched = torch.ones_like(self.touched)
+        out.track_id, out.cameras = self.track_id if track_id is None else track_id, self.cameras
+        out.arrays = {key: torch.zeros_like(v) if empty else v.clone() for key, v in self.arrays.items()}
+        out.touched = torch.ones_like(self.touched) if empty else self.touched.clone()
         return out
 
     def posed(self) -> torch.Tensor:
@@ -187,8 +187,7 @@ def _apply(table: dict[int, _Rows], fix: IdFix, numbers: Sequence[int], next_id:
     rows, a = fix.rows(numbers), table[fix.first]
     if fix.verb == "swap":
         b = table[fix.second]
-        saved = _Rows.__new__(_Rows)
-        saved.arrays = {key: value.clone() for key, value in a.arrays.items()}
+        saved = a.copy()
         a.take(b, rows)
         b.take(saved, rows)
         return f"{fix.text}: persons {fix.first} and {fix.second} traded frames {_spans_text(rows, numbers)}"
@@ -209,7 +208,7 @@ def _apply(table: dict[int, _Rows], fix: IdFix, numbers: Sequence[int], next_id:
     if not bool(mine.any()):
         raise ValueError(f"fix {fix.text!r}: person {fix.first} has no pose or box in those frames")
     if fix.verb == "split":
-        table[next_id] = table[fix.first].empty_like(next_id)
+        table[next_id] = a.copy(next_id, empty=True)
         table[next_id].take(a, mine)
         a.clear(mine)
         return f"{fix.text}: frames {_spans_text(mine, numbers)} are a new person {next_id}'s"
