@@ -34,7 +34,8 @@ gave other counts for the same code: BENCHMARKS.md, "A borrowed pose"). The last
 scenes: identity switches (over clear frames), the true people's mean covered share, the
 returned people that cover nobody, and the frames with a pose on a true person and those poses' switches,
 by kind (:func:`switch_kinds`; ``--why`` prints each one), and how many of those switches lie in the frames
-the product marks to check (:func:`checked`), which are so many of the returned people's frames with a pose.
+the product marks to check (:func:`checked`), which are so many of the returned people's frames with a pose;
+and the switches seen from the returned people's side (:func:`track_changes`).
 """
 
 from __future__ import annotations
@@ -158,6 +159,19 @@ def pose_switches(covering: list[list[int | None]]) -> list[dict]:
     return out
 
 
+def track_changes(covering: list[list[int | None]], returned: int) -> int:
+    """The switches seen from the returned people's side (``covering``: :func:`pose_owners`; ``returned``
+    people): how often a returned person's poses go from one true person to another (a track that
+    carries two people's poses in turn; MOT's per-true-person count misses it where the other has
+    no track of its own)."""
+    changes = 0
+    for q in range(returned):
+        seq = [p for t in range(len(covering[0]) if covering else 0) for p, owners in enumerate(covering)
+               if owners[t] == q]  # fmt: skip
+        changes += sum(a != b for a, b in zip(seq, seq[1:]))
+    return changes
+
+
 def switch_kinds(covering: list[list[int | None]]) -> list[tuple[int, int, int, str]]:
     """Each switch of the poses (``covering``: :func:`pose_owners`) as (true person, frame before,
     frame after, kind): "new after a gap" / "new, next frame" (the old track has no pose on anyone
@@ -246,7 +260,7 @@ def main() -> None:
     print("| scene | true person: visible frames, covered, identity switches (pose: frames, switches) "
           "| people returned (false) | s |")  # fmt: skip
     print("| --- | --- | --- | --- |")
-    out, total, clear, covered, false_total, poses, pose_frames, kinds = [], 0, 0, [], 0, 0, 0, {}
+    out, total, clear, covered, false_total, poses, pose_frames, kinds, carried = [], 0, 0, [], 0, 0, 0, {}, 0
     marked = [0, 0, 0]  # switches caught, frames marked, frames with a pose (:func:`checked`)
     for n in (int(v) for v in args.people.split(",")):
         for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
@@ -268,6 +282,7 @@ def main() -> None:
                 if args.why:
                     print(f"  {n} people, s{seed}, true person {p}: frames {t0} -> {t1}, {kind}")
             poses += sum(r["pose_switches"] for r in rows)
+            carried += track_changes(owners, len(posed))
             pose_frames += sum(r["pose_frames"] for r in rows)
             total += sum(r["switches"] for r in rows)
             clear += sum(r["clear_switches"] for r in rows)
@@ -281,7 +296,8 @@ def main() -> None:
     print(f"identity switches {total} ({clear} over clear frames), covered {sum(covered) / max(len(covered), 1):.0%}, "
           f"false people {false_total}; poses on a true person {pose_frames} frames, their switches {poses} "
           f"({', '.join(f'{k} {v}' for k, v in sorted(kinds.items()))}); in the frames marked to check "
-          f"{marked[0]}, marked {marked[1]} of {marked[2]} frames with a pose")
+          f"{marked[0]}, marked {marked[1]} of {marked[2]} frames with a pose; a returned person's poses going "
+          f"from one true person to another {carried}")
     if args.json:
         Path(args.json).write_text(json.dumps({"settings": vars(args), "packages": package_versions(), "scenes": out},
                                               indent=1))
