@@ -184,6 +184,15 @@ def test_the_command_fixes_a_copy_and_draws_the_sheet(crossing, tmp_path, capsys
         assert main(["ids", str(tmp_path / "scene"), *extra]) == 2
         err = capsys.readouterr().err
         assert words in err and err.startswith("lit-boot ids: error: ") and len(err.splitlines()) == 1, err
+    assert main(["ids", str(tmp_path / "fixed"), "--sheet", str(tmp_path / "all.png"), "--frames", "0-2, 6"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    from lit_boot.data import read_png
+
+    assert read_png(tmp_path / "all.png").shape[1:] == (64 * 320 // 128, 4 * 320)  # 4 tiles of 320 px in one line
+    for extra, words in [(["--frames", "all"], "--frames: says which frames --sheet draws"),
+                         (["--sheet", str(tmp_path / "x.png"), "--frames", "20"], "--frames: frames 20 are none")]:
+        assert main(["ids", str(tmp_path / "fixed"), *extra]) == 2
+        assert words in capsys.readouterr().err
     assert main(["ids", str(tmp_path / "p.npz"), "--sheet", str(tmp_path / "s.png")]) == 2
     assert "--sheet: needs the frames" in capsys.readouterr().err
     assert main(["ids", str(tmp_path / "none")]) == 2

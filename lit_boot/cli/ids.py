@@ -2,10 +2,10 @@
 
 Without ``--fix``: the people, the frames where an id may have switched ("ids to check"), and with
 ``--sheet ids.png`` (a scene folder: it has the frames) those frames drawn, every person in its
-colour with its track id (:func:`lit_boot.estimate.id_sheet`). With ``--fix "swap 1 2 at 7-"``
-(repeatable; the fixes of :mod:`lit_boot.estimate.id_fixes`): a fixed copy written to ``--out``
-(a scene folder for a scene folder, a pose file for a pose file; the input is never changed),
-what each fix did, and the frames to check after it.
+colour with its track id (:func:`lit_boot.estimate.id_sheet`; ``--frames 3-9`` or ``all``: other
+frames). With ``--fix "swap 1 2 at 7-"`` (repeatable; the fixes of :mod:`lit_boot.estimate.id_fixes`):
+a fixed copy written to ``--out`` (a scene folder for a scene folder, a pose file for a pose file;
+the input is never changed), what each fix did, and the frames to check after it.
 """
 
 from __future__ import annotations
@@ -32,6 +32,9 @@ def ids_parser() -> ArgumentParser:
                         help="where the fixed copy goes: a new scene folder, or a pose file (.npz, .json)")
     parser.add_argument("--sheet", type=Path | None, default=None,
                         help="a PNG of the frames to check (after the fixes), each person named (scene folders)")
+    parser.add_argument("--frames", type=str | None, default=None,
+                        help="the frames --sheet draws: 'all', or video frame numbers like '3-9, 12' (default: "
+                             "the frames to check)")  # fmt: skip
     parser.add_argument("--overwrite", type=bool, nargs="?", const=True, default=False, help="replace --out")
     return parser
 
@@ -63,6 +66,8 @@ def _check_args(args) -> bool:
                            f"(lit-boot import video VIDEO --poses {source} --people all makes one)")  # fmt: skip
         if args.sheet.suffix.lower() != ".png":
             raise CliError(f"--sheet {args.sheet}: expected a .png file name")
+    elif args.frames is not None:
+        raise CliError("--frames: says which frames --sheet draws; give --sheet too")
     return is_scene
 
 
@@ -84,6 +89,11 @@ def ids(argv: list[str]) -> int:
 
         item = load_poses(args.input)
         numbers = item.frame_indices.tolist()
+    picked = None
+    if args.frames is not None:
+        from ..estimate.id_fixes import frame_rows
+
+        picked = frame_rows(args.frames, numbers, "--frames").nonzero().flatten().tolist()
     if args.fix:
         item, notes = (fix_scene if is_scene else fix_estimates)(item, args.fix)
         for note in notes:
@@ -105,18 +115,20 @@ def ids(argv: list[str]) -> int:
             save_poses(item, args.out)
         print(f"wrote {args.out}")
     if args.sheet is not None:
-        _write_sheet(item, numbers, args.sheet)
+        _write_sheet(item, numbers, args.sheet, picked)
     return 0
 
 
-def _write_sheet(scene, numbers: list[int], path: Path) -> None:
-    """The id sheet of ``scene``'s frames to check to ``path``; a line saying so (or why none)."""
+def _write_sheet(scene, numbers: list[int], path: Path, rows: list[int] | None) -> None:
+    """The id sheet of ``scene``'s frames to check (or of the frame ``rows``, --frames) to ``path``;
+    a line saying so (or why none)."""
     from ..data import write_png
     from ..estimate import id_sheet, sheet_rows
 
-    rows = sheet_rows(scene.people()) if scene.num_people > 1 else []
+    if rows is None:
+        rows = sheet_rows(scene.people()) if scene.num_people > 1 else []
     if not rows:
-        print(f"no frame to check: {path} not written")
+        print(f"no frame to check: {path} not written (--frames all draws every frame)")
         return
     write_png(path, id_sheet(scene.frames, scene.people(), scene.keypoints_layout, rows, numbers))
     shown = f" (the first 48 of {len(rows)})" if len(rows) > 48 else ""

@@ -35,7 +35,7 @@ from ..core.scene import Scene
 from ..data.readers.pose_estimates import PoseEstimates
 from .world_to_lsp import nearest_found
 
-__all__ = ["IdFix", "parse_fix", "fix_ids", "fix_scene", "fix_estimates", "FIX_GRAMMAR"]
+__all__ = ["IdFix", "parse_fix", "fix_ids", "fix_scene", "fix_estimates", "frame_rows", "FIX_GRAMMAR"]
 
 #: One line on what a fix may say (errors end with it).
 FIX_GRAMMAR = ("a fix is one of: 'swap A B [at FRAMES]', 'join B into A', 'split A at FRAMES', 'drop A [at FRAMES]' "
@@ -66,33 +66,48 @@ class IdFix:
     def rows(self, numbers: Sequence[int]) -> torch.Tensor:
         """(T,) bool: the rows whose video frame ``numbers`` (T,) lie in the fix's frames. Raises
         ValueError where a span holds no frame of the clip."""
-        numbers_t = torch.as_tensor(list(numbers), dtype=torch.int64)
-        if self.spans is None:
-            return torch.ones(len(numbers_t), dtype=torch.bool)
-        rows = torch.zeros(len(numbers_t), dtype=torch.bool)
-        last = int(numbers_t.max()) if len(numbers_t) else 0
-        for start, stop in self.spans:
-            here = (numbers_t >= start) & (numbers_t <= (last if stop is None else stop))
-            if not bool(here.any()):
-                shown = str(start) if stop == start else f"{start}-{'' if stop is None else stop}"
-                raise ValueError(f"fix {self.text!r}: frames {shown} are none of the clip's video frames "
-                                 f"({int(numbers_t.min())}-{last})")  # fmt: skip
-            rows |= here
-        return rows
+        return _span_rows(self.spans, numbers, f"fix {self.text!r}")
 
 
-def _spans(text: str, fix: str) -> tuple[tuple[int, int | None], ...]:
+def _span_rows(spans: tuple[tuple[int, int | None], ...] | None, numbers: Sequence[int], who: str) -> torch.Tensor:
+    """(T,) bool: the rows whose video frame ``numbers`` lie in ``spans`` (None: all); a ValueError
+    starting with ``who`` where a span holds none of them."""
+    numbers_t = torch.as_tensor(list(numbers), dtype=torch.int64)
+    if spans is None:
+        return torch.ones(len(numbers_t), dtype=torch.bool)
+    rows = torch.zeros(len(numbers_t), dtype=torch.bool)
+    last = int(numbers_t.max()) if len(numbers_t) else 0
+    for start, stop in spans:
+        here = (numbers_t >= start) & (numbers_t <= (last if stop is None else stop))
+        if not bool(here.any()):
+            shown = str(start) if stop == start else f"{start}-{'' if stop is None else stop}"
+            raise ValueError(f"{who}: frames {shown} are none of the clip's video frames "
+                             f"({int(numbers_t.min()) if len(numbers_t) else 0}-{last})")  # fmt: skip
+        rows |= here
+    return rows
+
+
+def _spans(text: str, who: str) -> tuple[tuple[int, int | None], ...]:
+    """Frame spans "7", "7-9", "7-", comma-separated, as (first, last or None); errors start with ``who``."""
     out = []
     for part in text.split(","):
         match = _SPAN.fullmatch(part.strip())
         if match is None:
-            raise ValueError(f"fix {fix!r}: {part.strip()!r} is not a frame span; {FIX_GRAMMAR}")
+            raise ValueError(f"{who}: {part.strip()!r} is not a frame span; {FIX_GRAMMAR}")
         start, dash, stop = match.groups()
         last = None if dash and stop is None else int(stop) if stop is not None else int(start)
         if last is not None and last < int(start):
-            raise ValueError(f"fix {fix!r}: frame span {part.strip()!r} ends before it starts")
+            raise ValueError(f"{who}: frame span {part.strip()!r} ends before it starts")
         out.append((int(start), last))
     return tuple(out)
+
+
+def frame_rows(text: str, numbers: Sequence[int], who: str = "frames") -> torch.Tensor:
+    """(T,) bool: the rows whose video frame ``numbers`` (T,) are named by ``text``: "all", or spans
+    as a fix writes them ("7", "7-9", "7-", "3-5, 9"). Raises ValueError starting with ``who``."""
+    if " ".join(text.split()).lower() == "all":
+        return _span_rows(None, numbers, who)
+    return _span_rows(_spans(text, who), numbers, who)
 
 
 def parse_fix(text: str) -> IdFix:
@@ -107,7 +122,8 @@ def parse_fix(text: str) -> IdFix:
             first, second = second, first
         if second and int(first) == int(second):
             raise ValueError(f"fix {said!r}: names person {first} twice")
-        return IdFix(verb, int(first), int(second) if second else None, _spans(frames, said) if frames else None, said)
+        spans = _spans(frames, f"fix {said!r}") if frames else None
+        return IdFix(verb, int(first), int(second) if second else None, spans, said)
     raise ValueError(f"fix {said!r}: not understood; {FIX_GRAMMAR}")
 
 
