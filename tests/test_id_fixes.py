@@ -188,7 +188,7 @@ def test_the_command_fixes_a_copy_and_draws_the_sheet(crossing, tmp_path, capsys
     assert "wrote" in capsys.readouterr().out
     from lit_boot.data import read_png
 
-    assert read_png(tmp_path / "all.png").shape[1:] == (64 * 320 // 128, 4 * 320)  # 4 tiles of 320 px in one line
+    assert read_png(tmp_path / "all.png").shape[1:] == (64 * 480 // 128, 4 * 480)  # 4 tiles of 480 px in one line
     for extra, words in [(["--frames", "all"], "--frames: says which frames --sheet draws"),
                          (["--sheet", str(tmp_path / "x.png"), "--frames", "20"], "--frames: frames 20 are none")]:
         assert main(["ids", str(tmp_path / "fixed"), *extra]) == 2

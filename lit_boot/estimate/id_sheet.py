@@ -40,15 +40,16 @@ def sheet_rows(people: Sequence[Person]) -> list[int]:
 
 
 def _text(image: np.ndarray, text: str, org: tuple[int, int], colour: tuple[int, int, int], scale: float,
-          taken: list[tuple[int, int, int, int]] | None = None) -> None:  # fmt: skip
+          taken: list[tuple[int, int, int, int]] | None = None, lowest: int | None = None) -> None:  # fmt: skip
     """``text`` in ``colour`` on a black box, its baseline's left end at ``org`` (kept inside the
-    image, and moved down past the boxes of ``taken`` (x0, y0, x1, y1), to which it is added), in place."""
+    image, and moved down past the boxes of ``taken`` (x0, y0, x1, y1), to which it is added, but
+    not below ``lowest``), in place."""
     (w, h), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
     x = int(min(max(org[0], 0), max(image.shape[1] - w - 2, 0)))
     y = int(max(org[1], h + 2))
     for _ in range(len(taken or [])):
         hit = [r for r in taken if x < r[2] and r[0] < x + w + 2 and y - h - 2 < r[3] and r[1] < y + base]
-        if not hit:
+        if not hit or (lowest is not None and max(r[3] for r in hit) + h + 3 > lowest):
             break
         y = max(r[3] for r in hit) + h + 3
     y = int(min(y, image.shape[0] - base - 1))
@@ -65,7 +66,7 @@ def _tile(frame: torch.Tensor, people: Sequence[Person], t: int, number: int, la
     height = max(1, round(H * s))
     image = torch.from_numpy(cv2.resize(frame.permute(1, 2, 0).numpy(), (width, height),
                                         interpolation=cv2.INTER_AREA)).permute(2, 0, 1)  # fmt: skip
-    labels = []
+    labels = []  # (track id, colour, box in the tile's px, has a pose)
     for p, person in enumerate(people):
         colour = person_colour(p)
         box = None if person.person_boxes is None or person.person_boxes[t, 4] <= 0 else person.person_boxes[t, :4]
@@ -83,14 +84,14 @@ def _tile(frame: torch.Tensor, people: Sequence[Person], t: int, number: int, la
     scale, taken = max(0.35, width / 800), []
     for track_id, colour, (x0, y0, x1, y1), posed in labels:
         cv2.rectangle(out, (round(float(x0)), round(float(y0))), (round(float(x1)), round(float(y1))), colour, 1)
-        _text(out, f"person {track_id}" + ("" if posed else " (no pose)"), (round(float(x0)), round(float(y0)) - 2),
-              colour, scale, taken)  # fmt: skip
+        _text(out, f"person {track_id}", (round(float(x0)), round(float(y0)) - 2), colour, scale, taken,
+              lowest=round(float(y1)))  # fmt: skip
     _text(out, f"frame {number}", (2, out.shape[0] - 4), (255, 255, 255), scale)
     return out
 
 
 def id_sheet(frames: torch.Tensor, people: Sequence[Person], layout: str, rows: Sequence[int] | None = None,
-             numbers: Sequence[int] | None = None, *, tile_width: int = 320, columns: int = 4,
+             numbers: Sequence[int] | None = None, *, tile_width: int = 480, columns: int = 4,
              most: int = 48) -> torch.Tensor:  # fmt: skip
     """The id sheet (module docstring), uint8 (3, H', W'): frames (T, 3, H, W) uint8 RGB, the
     scene's ``people`` (keypoints in ``layout``, boxes x0, y0, x1, y1 px), the frame ``rows`` to
