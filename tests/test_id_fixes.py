@@ -133,6 +133,11 @@ def test_a_scene_reads_its_video_frame_numbers(crossing):
     fixed, notes = fix_scene(scene, [f"drop {b} at 46-"])
     assert (fixed.people()[1].keypoints_conf[6:] == 0).all() and (fixed.people()[1].keypoints_conf[:6] > 0).any()
     assert fixed.metadata["id_fixes"][-1]["done"] == notes and torch.equal(fixed.gt.flow, scene.gt.flow)
+    a = scene.people()[0].track_id
+    led, _ = fix_scene(scene, [f"drop {a}"])  # the main person goes: the next leads, with its own truth
+    truths = {t.track_id: t for t in scene.gt.truths([p.track_id for p in scene.people()])}
+    assert led.track_id == b and torch.equal(led.gt.joints3d, truths[b].joints3d)
+    assert torch.equal(led.gt.truths([b, a])[1].joints3d, truths[a].joints3d)
 
 
 def test_the_sheet_draws_each_person_in_its_colour_where_it_is(crossing):

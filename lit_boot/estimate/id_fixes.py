@@ -270,11 +270,15 @@ def _history(metadata: dict, fixes: Sequence[str | IdFix], notes: list[str]) -> 
 def fix_scene(scene: Scene, fixes: Sequence[str | IdFix]) -> tuple[Scene, list[str]]:
     """``scene`` with its people's ids fixed (:func:`fix_ids`, frame numbers from
     ``scene.metadata["frame_indices"]`` where recorded), the fixes and what they did appended to
-    ``metadata["id_fixes"]``; and those lines. The ground truth is left as it is."""
+    ``metadata["id_fixes"]``; and those lines. The ground truth stays each track's (where the main
+    person goes, the next one's truth becomes the main one, :meth:`~lit_boot.core.scene.GroundTruth.with_main`)."""
     numbers = scene.metadata.get("frame_indices") or list(range(scene.num_frames))
     people, notes = fix_ids(scene.people(), fixes, numbers)
     meta = {**scene.metadata, "id_fixes": _history(scene.metadata, fixes, notes)}
-    return dataclasses.replace(scene.with_people(people), metadata=meta), notes
+    gt = scene.gt
+    if gt is not None and people[0].track_id != scene.track_id:  # the main person went: the next one leads
+        gt = gt.with_main(people[0].track_id, scene.track_id)
+    return dataclasses.replace(scene.with_people(people), metadata=meta, gt=gt), notes
 
 
 def fix_estimates(estimates: PoseEstimates, fixes: Sequence[str | IdFix]) -> tuple[PoseEstimates, list[str]]:
