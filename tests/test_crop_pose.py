@@ -11,7 +11,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from lit_boot.estimate.crop_pose import CROP_ATTEMPTS, crop_landmarks, crop_window
+from lit_boot.estimate.crop_pose import CROP_ATTEMPTS, crop_landmarks, crop_window, follow_landmarks
 from test_estimate_mediapipe import VIDEO, needs_mediapipe
 
 
@@ -91,3 +91,44 @@ def test_a_small_player_missed_on_the_whole_frame_is_found_on_the_detectors_crop
     sure = (full.keypoints_conf > 0.5) & (est.keypoints_conf > 0.5)
     err = (est.keypoints2d - expected).norm(dim=-1)[sure]
     assert sure.sum() >= 16 and err.median() < 4.0, (sure.sum(), err.median())  # the player is ~70 px tall
+
+
+class Made:
+    """``make_pose`` for :func:`follow_landmarks`: a new stand-in Pose (a context manager) each call, counted."""
+
+    def __init__(self, kind=BrightestPoint) -> None:
+        self.kind, self.made = kind, []
+
+    def __call__(self):
+        pose = self.kind()
+        self.made.append(pose)
+        return _Context(pose)
+
+
+class _Context:
+    def __init__(self, pose) -> None:
+        self.pose = pose
+
+    def __enter__(self):
+        return self.pose
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+
+def test_a_followed_person_has_one_crop_side_and_a_new_pose_after_frames_without_a_box():
+    frames = torch.zeros(5, 3, 90, 160, dtype=torch.uint8)
+    points = [(37, 51), (40, 50), (0, 0), (60, 45), (64, 44)]
+    for t, (x, y) in enumerate(points):
+        frames[t, :, y, x] = 255 if t != 2 else 0
+    boxes = torch.tensor([[25.0, 30.0, 45.0, 70.0, 0.9], [28.0, 30.0, 50.0, 72.0, 0.9], [0.0, 0.0, 0.0, 0.0, 0.0],
+                          [50.0, 25.0, 70.0, 64.0, 0.8], [54.0, 24.0, 76.0, 66.0, 0.9]])  # fmt: skip
+    made = Made()
+    out = follow_landmarks(made, frames, boxes)
+    assert out["found"].tolist() == [True, True, False, True, True]
+    assert len(made.made) == 2 and [len(p.sizes) for p in made.made] == [2, 2]  # a new Pose after the gap
+    side = 40.0 * 1.5  # the boxes' median larger side (40 px), 0.25 of it on both sides
+    for t in (0, 1, 3, 4):  # centred on each box, one side: the bright pixel comes back within a crop pixel
+        err = (out["landmarks"][t, 0] - torch.tensor(points[t], dtype=torch.float)).abs().max()
+        assert err <= side / 384 + 0.05, (t, out["landmarks"][t, 0], points[t])
+    assert all(size == (384, 384) for p in made.made for size in p.sizes)

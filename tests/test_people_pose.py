@@ -340,3 +340,36 @@ def test_a_pose_borrowed_from_the_person_in_front_counts_for_neither_track():
     assert posed(main) == [True, True, True] and posed(other) == [True, True, False]
     assert [r["borrowed"] for r in est.metadata["people"]] == [0, 1]
     assert [r["duplicates"] for r in est.metadata["people"]] == [0, 0]
+
+
+class Wandering(StandingAtTheBrightest):
+    """A video-mode stand-in: 3 px right of the brightest pixel (to tell its poses from the static
+    crops'), nobody on its 2nd crop and a pose 60 px to the left (out of A's box) on its 3rd; on A's
+    crops, 150 frame px a side (A's 100 px height and 0.25 of it on both sides)."""
+
+    calls = 0
+
+    def process(self, image):
+        Wandering.calls += 1
+        result = super().process(image)
+        if Wandering.calls == 2 or result.pose_landmarks is None:
+            return SimpleNamespace(pose_landmarks=None, pose_world_landmarks=None)
+        for lm in result.pose_landmarks.landmark:
+            lm.x += (3 if Wandering.calls != 3 else -60) / 150  # frame px over the crop's side
+        return result
+
+
+def test_a_track_is_followed_in_video_mode_and_the_static_crops_fill_where_it_followed_someone_else():
+    from contextlib import nullcontext
+
+    frames, detector = two_people(T=4)
+    boxes = detector.detect_frames(frames)
+    a = torch.stack([d[0] for d in boxes])  # A's box in every frame (40 px wide, 100 tall)
+    Wandering.calls = 0
+    followed = MediaPipeCrops(StandingAtTheBrightest(), assemble(frames), video_pose=lambda: nullcontext(Wandering()))
+    est = followed.estimate_track(frames, a)
+    static = crops(frames).estimate_person(frames, a)
+    assert est.found().tolist() == [True, False, True, True] and Wandering.calls == 4  # lost in frame 1: nobody
+    dx = (est.keypoints2d - static.keypoints2d)[..., 0].mean(-1)  # per frame, video minus static, px
+    assert (dx[[0, 3]] > 1).all()  # the followed poses, shifted right
+    assert torch.equal(est.keypoints2d[2], static.keypoints2d[2])  # followed out of the box: the static crop's

@@ -20,7 +20,9 @@ import cv2
 import numpy as np
 import torch
 
-__all__ = ["crop_window", "crop_landmarks", "CROP_ATTEMPTS"]
+from ..core.frame_runs import frame_runs
+
+__all__ = ["crop_window", "crop_landmarks", "follow_landmarks", "CROP_ATTEMPTS"]
 
 #: The framings tried in turn: (margin around the box on every side, as a fraction of its larger
 #: side; the side in px the square crop is resized to before MediaPipe sees it).
@@ -63,9 +65,7 @@ def crop_landmarks(pose, frames: torch.Tensor, boxes: torch.Tensor, todo: torch.
     visibility, presence, world (T, 33, 3) m, found (T,), seconds (T,)), filled only where a
     crop found somebody, and ``attempt`` (T,) int64: the framing's index (-1: none found)."""
     T = frames.shape[0]
-    out = {"landmarks": torch.zeros(T, 33, 2), "visibility": torch.zeros(T, 33), "presence": torch.zeros(T, 33),
-           "world": torch.zeros(T, 33, 3), "found": torch.zeros(T, dtype=torch.bool),
-           "seconds": torch.zeros(T), "attempt": torch.full((T,), -1, dtype=torch.int64)}  # fmt: skip
+    out = _empty(T)
     for t in torch.nonzero(todo & (boxes[:, 4] > 0)).flatten().tolist():
         frame = np.ascontiguousarray(frames[t].permute(1, 2, 0).numpy())
         start = time.perf_counter()
@@ -77,11 +77,56 @@ def crop_landmarks(pose, frames: torch.Tensor, boxes: torch.Tensor, todo: torch.
         out["seconds"][t] = time.perf_counter() - start
         if result is None:
             continue
-        lms = result.pose_landmarks.landmark
-        crop_px = torch.tensor([[lm.x * side_px - 0.5, lm.y * side_px - 0.5] for lm in lms])
-        out["landmarks"][t] = (crop_px + 0.5) * (side / side_px) - 0.5 + torch.tensor([cx - side / 2, cy - side / 2])
-        out["visibility"][t] = torch.tensor([lm.visibility for lm in lms])
-        out["presence"][t] = torch.tensor([lm.presence if lm.HasField("presence") else 1.0 for lm in lms])
-        out["world"][t] = torch.tensor([[lm.x, lm.y, lm.z] for lm in result.pose_world_landmarks.landmark])
-        out["found"][t], out["attempt"][t] = True, k
+        _store(out, t, result, cx, cy, side, side_px)
+        out["attempt"][t] = k
+    return out
+
+
+def _empty(T: int) -> dict[str, torch.Tensor]:
+    """The arrays of :func:`crop_landmarks` for T frames, nobody found."""
+    return {"landmarks": torch.zeros(T, 33, 2), "visibility": torch.zeros(T, 33), "presence": torch.zeros(T, 33),
+            "world": torch.zeros(T, 33, 3), "found": torch.zeros(T, dtype=torch.bool),
+            "seconds": torch.zeros(T), "attempt": torch.full((T,), -1, dtype=torch.int64)}  # fmt: skip
+
+
+def _store(out: dict[str, torch.Tensor], t: int, result, cx: float, cy: float, side: float, side_px: int) -> None:
+    """MediaPipe's ``result`` on the crop (cx, cy, side) resized to ``side_px``, into row t of ``out``
+    (landmarks mapped back to frame pixels)."""
+    lms = result.pose_landmarks.landmark
+    crop_px = torch.tensor([[lm.x * side_px - 0.5, lm.y * side_px - 0.5] for lm in lms])
+    out["landmarks"][t] = (crop_px + 0.5) * (side / side_px) - 0.5 + torch.tensor([cx - side / 2, cy - side / 2])
+    out["visibility"][t] = torch.tensor([lm.visibility for lm in lms])
+    out["presence"][t] = torch.tensor([lm.presence if lm.HasField("presence") else 1.0 for lm in lms])
+    out["world"][t] = torch.tensor([[lm.x, lm.y, lm.z] for lm in result.pose_world_landmarks.landmark])
+    out["found"][t] = True
+
+
+def follow_landmarks(make_pose, frames: torch.Tensor, boxes: torch.Tensor, *, margin: float = CROP_ATTEMPTS[0][0],
+                     side_px: int = CROP_ATTEMPTS[0][1]) -> dict[str, torch.Tensor]:  # fmt: skip
+    """One tracked person's landmarks: MediaPipe in video mode (``make_pose()``: a new
+    ``mp.solutions.pose.Pose(static_image_mode=False)``, a context manager) on a square crop that
+    follows the person's ``boxes`` (T, 5) px over frames (T, 3, H, W) uint8 RGB: centred on each
+    frame's box, of one side for the whole track (the boxes' median larger side plus ``margin`` of
+    it on both sides), resized to ``side_px``. Video mode follows the person it found from one
+    frame to the next, where the crops of a box holding two people give static mode now one's pose,
+    now the other's (BENCHMARKS.md, "Each track's poses in video mode"). A new Pose starts after
+    frames without a box. Returns the arrays of :func:`crop_landmarks` (``attempt`` 0 where found)."""
+    T = frames.shape[0]
+    out = _empty(T)
+    have = boxes[:, 4] > 0
+    if not bool(have.any()):
+        return out
+    larger = torch.maximum(boxes[have, 2] - boxes[have, 0], boxes[have, 3] - boxes[have, 1])
+    side = max(float(larger.median()), 1.0) * (1 + 2 * margin)
+    for first, last in frame_runs(torch.nonzero(have).flatten().tolist()):
+        with make_pose() as pose:
+            for t in range(first, last + 1):
+                frame = np.ascontiguousarray(frames[t].permute(1, 2, 0).numpy())
+                cx, cy = float(boxes[t, 0] + boxes[t, 2]) / 2, float(boxes[t, 1] + boxes[t, 3]) / 2
+                start = time.perf_counter()
+                result = _process(pose, _square_crop(frame, cx, cy, side, side_px))
+                out["seconds"][t] = time.perf_counter() - start
+                if result is not None:
+                    _store(out, t, result, cx, cy, side, side_px)
+                    out["attempt"][t] = 0
     return out

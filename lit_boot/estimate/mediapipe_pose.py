@@ -302,10 +302,14 @@ def _people(mp: Any, frames: torch.Tensor, frame_indices: torch.Tensor | None, p
         return poses_from_landmarks(landmarks, confidence, world, found, size, frame_indices, max_jump=max_jump,
                                     on_jump=on_jump, source=source)  # fmt: skip
 
+    def video_pose():
+        return _pose_solution(mp, model_complexity, min_detection_confidence, 0.5, static_image_mode=False)
+
     meta = {"model_complexity": model_complexity, "min_detection_confidence": min_detection_confidence,
-            "mediapipe_version": mp.__version__, "detector": detector_name(detector), "mode": "top-down, static crops"}
+            "mediapipe_version": mp.__version__, "detector": detector_name(detector),
+            "mode": "top-down: static crops per detection, video mode on a crop following each track"}
     with _pose_solution(mp, model_complexity, min_detection_confidence, 0.5, static_image_mode=True) as pose:
-        return estimate_people(MediaPipeCrops(pose, assemble), frames, detector, people, meta)
+        return estimate_people(MediaPipeCrops(pose, assemble, video_pose), frames, detector, people, meta)
 
 
 def _with_crops(mp: Any, raw: dict[str, torch.Tensor], frames: torch.Tensor, boxes: torch.Tensor,

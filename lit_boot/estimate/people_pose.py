@@ -6,8 +6,10 @@ square crops around each detection (:func:`~.crop_pose.crop_landmarks`, the fram
 tracks by their overlap and their keypoints (:func:`~.people_track.track_people`: who is who
 where two boxes overlap; a person hidden for longer than a gap is found again by its look, the
 colours near its joints, :mod:`.looks`), keeps the ones ``people`` asks for (all, the largest, or the N most
-prominent) and gives each track the poses of its boxes (the crops of the frames it bridges are
-run then; :class:`MediaPipeCrops` runs each crop once). A crop may show a neighbour more clearly
+prominent) and gives each track the poses of its boxes (the estimator's ``estimate_track``:
+:class:`MediaPipeCrops` follows the person in video mode on a crop that follows its boxes, and
+where its pose lies outside the box the static crops, each run once; the crops of the frames a
+track bridges are run then). A crop may show a neighbour more clearly
 than the detection's person: a pose counts for it only where the centre of its confident
 keypoints' box (those inside the frame) lies inside the box (else the frame has confidence 0 for
 that person, counted in ``metadata["people"][i]["not_theirs"]``). One pose, one person
@@ -69,9 +71,12 @@ class PersonPoseEstimator(Protocol):
 
     ``estimate_person(frames, boxes)``: one person's PoseEstimates over frames (T, 3, H, W) uint8
     RGB from their boxes (T, 5) (x0, y0, x1, y1 px, score; 0 = no box: confidence 0 there), in the
-    frames' pixels. ``keep_frames(estimates, keep)``: the same person's estimates counting only
+    frames' pixels; the boxes may be different people's (each detection's pose is asked for this
+    way too). ``keep_frames(estimates, keep)``: the same person's estimates counting only
     the frames ``keep`` (T,) bool (the others are another person's pose); :func:`mask_frames` does
-    it for estimators with nothing to refit.
+    it for estimators with nothing to refit. Optional, ``estimate_track(frames, boxes)``: the same
+    for boxes that are one tracked person's, frame to frame (an estimator that follows a person
+    over time uses it; without it, ``estimate_person`` is asked).
     """
 
     def estimate_person(self, frames: torch.Tensor, boxes: torch.Tensor) -> PoseEstimates: ...
@@ -87,7 +92,9 @@ def mask_frames(estimates: PoseEstimates, keep: torch.Tensor) -> PoseEstimates:
 
 class MediaPipeCrops:
     """The built-in :class:`PersonPoseEstimator`: MediaPipe Pose (static-image mode, ``pose``) on
-    square crops around each box (:func:`~.crop_pose.crop_landmarks`), the estimates made by
+    square crops around each box (:func:`~.crop_pose.crop_landmarks`); each track's poses, with
+    ``video_pose`` (a function making a video-mode Pose), from MediaPipe following the person on a
+    crop that follows its boxes (:meth:`estimate_track`), the estimates made by
     ``assemble(landmarks, confidence, world, found)`` from MediaPipe-33 arrays
     (:func:`~.mediapipe_pose.poses_from_landmarks` with the run's options); ``keep_frames`` makes
     them again from the same landmarks (the 3D fill-in and the cameras then ignore the dropped
@@ -95,8 +102,8 @@ class MediaPipeCrops:
     MediaPipe runs once per crop: a box already seen in that frame (of the same frames) reuses
     its landmarks."""
 
-    def __init__(self, pose: Any, assemble: Any):
-        self.pose, self.assemble = pose, assemble
+    def __init__(self, pose: Any, assemble: Any, video_pose: Any = None):
+        self.pose, self.assemble, self.video_pose = pose, assemble, video_pose
         # every estimates made of the current frames, with the landmarks, confidences and found frames behind it
         self._made: list[tuple[PoseEstimates, dict[str, torch.Tensor], torch.Tensor, torch.Tensor]] = []
         self._frames: torch.Tensor | None = None
@@ -133,6 +140,28 @@ class MediaPipeCrops:
         self._made.append((est, raw, conf, raw["found"]))
         return est
 
+    def estimate_track(self, frames: torch.Tensor, boxes: torch.Tensor) -> PoseEstimates:
+        """One tracked person's estimates: with ``video_pose`` (a function making a video-mode
+        ``mp.solutions.pose.Pose``), MediaPipe follows the person on a crop that follows its boxes
+        (:func:`~.crop_pose.follow_landmarks`), and where its pose lies outside the box
+        (:func:`pose_in_box`: it followed someone else) the static crops are used
+        (:meth:`estimate_person`'s, their framings in turn); without, as :meth:`estimate_person`."""
+        from .crop_pose import follow_landmarks
+        from .world_to_lsp import landmark_confidence
+
+        if self.video_pose is None or not bool((boxes[:, 4] > 0).any()):
+            return self.estimate_person(frames, boxes)
+        followed, cropped = follow_landmarks(self.video_pose, frames, boxes), self._crops(frames, boxes)
+        video = self.assemble(followed["landmarks"], landmark_confidence(followed["visibility"], followed["presence"]),
+                              followed["world"], followed["found"])  # fmt: skip
+        # where video mode followed someone out of the box: the static crops' framings in turn
+        away = video.found() & ~pose_in_box(video.keypoints2d, video.keypoints_conf, boxes, tuple(frames.shape[2:]))
+        raw = {k: torch.where(away.view(-1, *[1] * (v.ndim - 1)), cropped[k], v) for k, v in followed.items()}
+        conf = landmark_confidence(raw["visibility"], raw["presence"])
+        est = self.assemble(raw["landmarks"], conf, raw["world"], raw["found"])
+        self._made.append((est, raw, conf, raw["found"]))
+        return est
+
     def keep_frames(self, estimates: PoseEstimates, keep: torch.Tensor) -> PoseEstimates:
         made = next((m for m in self._made if m[0] is estimates), None)
         if made is None:  # not made here: nothing to refit
@@ -151,8 +180,9 @@ def bridged_frames(boxes: torch.Tensor, detections: list[torch.Tensor]) -> torch
 
 
 def _one_person(estimator: PersonPoseEstimator, frames: torch.Tensor, boxes: torch.Tensor) -> tuple[PoseEstimates, int]:
-    """The estimates of the person in ``boxes`` (T, 5), and how many crops showed someone else."""
-    est = estimator.estimate_person(frames, boxes)
+    """The estimates of the person in ``boxes`` (T, 5) (the estimator's ``estimate_track`` where it
+    has one), and how many crops showed someone else."""
+    est = getattr(estimator, "estimate_track", estimator.estimate_person)(frames, boxes)
     others = est.found() & ~pose_in_box(est.keypoints2d, est.keypoints_conf, boxes, tuple(frames.shape[2:]))
     if not bool(others.any()):
         return est, 0
