@@ -120,7 +120,9 @@ def test_after_a_fit_other_frames_are_predicted_warm_from_their_own_untuned_flow
     untuned = FlowTTT(**WARM)
     untuned.raft.load_state_dict({**model.raft.state_dict(), **model.warm.untuned})
     with torch.no_grad():
-        torch.testing.assert_close(cache.base, predict_flow(untuned.raft.eval(), other.frames[0], other.frames[1], 3))
+        # the same flow by two paths; their float sums differ by CPU (1.4e-5 px on an AMD EPYC): 1e-4 px
+        untuned_flow = predict_flow(untuned.raft.eval(), other.frames[0], other.frames[1], 3)
+        torch.testing.assert_close(cache.base, untuned_flow, atol=1e-4, rtol=1e-4)
         whole = (0, cache.cells[0], 0, cache.cells[1])
         tuned = cache.flows(model.raft.eval(), 0, whole, 2)[-1]
     _, (by0, by1, bx0, bx1) = box_region(whole, cache.pad, flow.shape[-2:])
