@@ -81,8 +81,10 @@ def ids(argv: list[str]) -> int:
         from ..data import load_scene, save_scene
         from ..estimate.id_fixes import fix_scene
 
+        from ..estimate.id_checks import frame_numbers
+
         item = load_scene(args.input)
-        numbers = item.metadata.get("frame_indices") or list(range(item.num_frames))
+        numbers = frame_numbers(item)
     else:
         from ..data.readers.pose_file import load_poses, save_poses
         from ..estimate.id_fixes import fix_estimates

@@ -27,7 +27,7 @@ from ..core.people import Person
 from .pose_duplicates import keypoint_extent
 from .track_cost import box_overlaps
 
-__all__ = ["frames_to_check", "frame_ranges", "checks_line", "scene_checks", "OVERLAP_IOU"]
+__all__ = ["frames_to_check", "frame_ranges", "frame_numbers", "checks_line", "scene_checks", "OVERLAP_IOU"]
 
 #: The box overlap (IoU) with another person from which a frame is one to check.
 OVERLAP_IOU = 0.3
@@ -89,13 +89,19 @@ def checks_line(checks: Sequence[tuple[int, Sequence[int]]]) -> str:
     return f"ids to check (people overlapping, new or found again), video frames: {where}" if where else ""
 
 
+def frame_numbers(scene) -> list[int]:
+    """A Scene's video frame numbers: ``scene.metadata["frame_indices"]`` where its reader recorded
+    them, else 0..T-1."""
+    return list(scene.metadata.get("frame_indices") or range(scene.num_frames))
+
+
 def scene_checks(scene) -> list[tuple[int, list[int]]]:
     """(track id, video frame numbers) to check for each person of a Scene with several people
     (:func:`frames_to_check`; frame numbers from ``scene.metadata["frame_indices"]`` where its reader
     recorded them, else 0..T-1); [] for one person."""
     if not scene.others:
         return []
-    numbers = scene.metadata.get("frame_indices") or list(range(scene.num_frames))
+    numbers = frame_numbers(scene)
     marks = frames_to_check(scene.people())
     return [(person.track_id, [int(numbers[t]) for t in mark.nonzero().flatten().tolist()])
             for person, mark in zip(scene.people(), marks)]  # fmt: skip

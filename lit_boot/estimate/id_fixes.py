@@ -33,6 +33,7 @@ from ..core.cameras import Cameras
 from ..core.people import Person
 from ..core.scene import Scene
 from ..data.readers.pose_estimates import PoseEstimates
+from .id_checks import frame_numbers, frame_ranges, frames_to_check
 from .world_to_lsp import nearest_found
 
 __all__ = ["IdFix", "parse_fix", "fix_ids", "fix_scene", "fix_estimates", "frame_rows", "FIX_GRAMMAR"]
@@ -190,8 +191,6 @@ class _Rows:
 
 
 def _spans_text(rows: torch.Tensor, numbers: Sequence[int]) -> str:
-    from .id_checks import frame_ranges
-
     return frame_ranges([int(numbers[t]) for t in rows.nonzero().flatten().tolist()])
 
 
@@ -272,8 +271,7 @@ def fix_scene(scene: Scene, fixes: Sequence[str | IdFix]) -> tuple[Scene, list[s
     ``scene.metadata["frame_indices"]`` where recorded), the fixes and what they did appended to
     ``metadata["id_fixes"]``; and those lines. The ground truth stays each track's (where the main
     person goes, the next one's truth becomes the main one, :meth:`~lit_boot.core.scene.GroundTruth.with_main`)."""
-    numbers = scene.metadata.get("frame_indices") or list(range(scene.num_frames))
-    people, notes = fix_ids(scene.people(), fixes, numbers)
+    people, notes = fix_ids(scene.people(), fixes, frame_numbers(scene))
     meta = {**scene.metadata, "id_fixes": _history(scene.metadata, fixes, notes)}
     gt = scene.gt
     if gt is not None and people[0].track_id != scene.track_id:  # the main person went: the next one leads
@@ -286,8 +284,6 @@ def fix_estimates(estimates: PoseEstimates, fixes: Sequence[str | IdFix]) -> tup
     ``frame_indices``), ``metadata["id_fixes"]`` appended and each ``metadata["people"]`` record's
     ``check_ids`` made again for the people after the fixes (records of people gone are left out);
     and what the fixes did."""
-    from .id_checks import frames_to_check
-
     people, notes = fix_ids(estimates.people(), fixes, estimates.frame_indices.tolist())
     records = {r.get("track_id"): r for r in estimates.metadata.get("people", []) if isinstance(r, dict)}
     checks = frames_to_check(people) if len(people) > 1 else [torch.zeros(estimates.num_frames, dtype=torch.bool)]
