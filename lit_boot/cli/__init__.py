@@ -75,7 +75,8 @@ COMMANDS: dict[str, Command] = {
     "bootstrap": Command("runs", "bootstrap",
                          "run the method (flow -> pose -> flow) on a scene folder or a video; reruns resume"),
     "bootstrap-many": Command("dataset", "bootstrap_many",
-                              "run the method on every scene of a dataset (Sintel, 3DPW, H36M, videos); resumable, Ray"),
+                              "run the method on every scene of a dataset (Sintel, 3DPW, H36M, videos); "
+                              "resumable, Ray"),
     "demo": Command("runs", "demo", "make a small synthetic scene, bootstrap it, print EPE and MPJPE before and after"),
     "report": Command("reporting", "report",
                       "write report.html for a finished run (or a dataset run): did the video get better, and where"),
