@@ -5,6 +5,7 @@ crop finds him where the full-size frame put him."""
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from types import SimpleNamespace
 
 import pytest
@@ -102,18 +103,7 @@ class Made:
     def __call__(self):
         pose = self.kind()
         self.made.append(pose)
-        return _Context(pose)
-
-
-class _Context:
-    def __init__(self, pose) -> None:
-        self.pose = pose
-
-    def __enter__(self):
-        return self.pose
-
-    def __exit__(self, *exc) -> None:
-        return None
+        return nullcontext(pose)
 
 
 def test_a_followed_person_has_one_crop_side_and_a_new_pose_after_frames_without_a_box():

@@ -79,9 +79,8 @@ def ids(argv: list[str]) -> int:
 
     if is_scene:
         from ..data import load_scene, save_scene
-        from ..estimate.id_fixes import fix_scene
-
         from ..estimate.id_checks import frame_numbers
+        from ..estimate.id_fixes import fix_scene
 
         item = load_scene(args.input)
         numbers = frame_numbers(item)
