@@ -33,7 +33,8 @@ The first line names the installed versions of the packages the counts move with
 gave other counts for the same code: BENCHMARKS.md, "A borrowed pose"). The last line sums the
 scenes: identity switches (over clear frames), the true people's mean covered share, the
 returned people that cover nobody, and the frames with a pose on a true person and those poses' switches,
-by kind (:func:`switch_kinds`; ``--why`` prints each one), and how many of those switches lie in the frames
+by kind (:func:`switch_kinds`; ``--why`` prints each one) and how many of them have a pose before or after
+that fits two true people (:func:`on_two`: within --max-pose-dist of both), how many lie in the frames
 the product marks to check (:func:`checked`), which are so many of the returned people's frames with a pose;
 and the switches seen from the returned people's side (:func:`track_changes`).
 """
@@ -121,6 +122,21 @@ def score(found: torch.Tensor, truth: torch.Tensor, min_iou: float) -> tuple[lis
     return rows, found.shape[0] - len(used)
 
 
+def pose_distances(est, truths: list, t: int) -> torch.Tensor:
+    """(len(truths),) the median distance of ``est``'s confident joints (> 0.3) in frame t from each
+    true person's (``truths``: keypoints2d (T, 17, 2)), in that person's size (its keypoints' larger
+    extent); inf everywhere with fewer than 4 confident joints."""
+    confident = est.keypoints_conf[t] > 0.3
+    out = torch.full((len(truths),), float("inf"))
+    if int(confident.sum()) < 4:
+        return out
+    for j, truth in enumerate(truths):
+        true = truth.keypoints2d[t]
+        size = float((true.amax(0) - true.amin(0)).max().clamp_min(1.0))
+        out[j] = (est.keypoints2d[t, confident] - true[confident]).norm(dim=-1).median() / size
+    return out
+
+
 def pose_owners(people: list, truths: list, visible: torch.Tensor, max_dist: float) -> list[list[int | None]]:
     """Per true person and frame, the returned person whose pose lies on it (None: nobody). A pose
     (``people``: PoseEstimates, coco17) lies on a true person (``truths``: each one's keypoints2d
@@ -133,13 +149,7 @@ def pose_owners(people: list, truths: list, visible: torch.Tensor, max_dist: flo
         here_p = [p for p in range(P) if visible[p, t]]
         cost = torch.full((len(people), len(here_p)), float("inf"))
         for q, est in enumerate(people):
-            confident = est.keypoints_conf[t] > 0.3
-            if int(confident.sum()) < 4:
-                continue
-            for j, p in enumerate(here_p):
-                true = truths[p].keypoints2d[t]
-                size = float((true.amax(0) - true.amin(0)).max().clamp_min(1.0))
-                cost[q, j] = (est.keypoints2d[t, confident] - true[confident]).norm(dim=-1).median() / size
+            cost[q] = pose_distances(est, [truths[p] for p in here_p], t)
         if not len(here_p) or not len(people):
             continue
         rows, cols = linear_sum_assignment(torch.nan_to_num(cost, posinf=1e6).numpy())
@@ -193,6 +203,17 @@ def switch_kinds(covering: list[list[int | None]]) -> list[tuple[int, int, int, 
             else:
                 kind = "new, next frame" if t1 == t0 + 1 else "new after a gap"
             out.append((p, t0, t1, kind))
+    return out
+
+
+def on_two(posed: list, truths: list, covering: list[list[int | None]], max_dist: float) -> list[bool]:
+    """Per switch of the poses (:func:`switch_kinds`' order): whether the pose before or after it
+    lies within ``max_dist`` of another true person as well as of its own (:func:`pose_distances`):
+    the two people stand where their joints nearly coincide, and the pose fits both."""
+    out = []
+    for p, t0, t1, _ in switch_kinds(covering):
+        near = [pose_distances(posed[covering[p][t]], truths, t) < max_dist for t in (t0, t1)]
+        out.append(any(int(n.sum()) - int(n[p]) > 0 for n in near))
     return out
 
 
@@ -261,6 +282,7 @@ def main() -> None:
           "| people returned (false) | s |")  # fmt: skip
     print("| --- | --- | --- | --- |")
     out, total, clear, covered, false_total, poses, pose_frames, kinds, carried = [], 0, 0, [], 0, 0, 0, {}, 0
+    fitting_two = 0  # switches whose pose fits two true people (:func:`on_two`)
     marked = [0, 0, 0]  # switches caught, frames marked, frames with a pose (:func:`checked`)
     for n in (int(v) for v in args.people.split(",")):
         for i, seed in enumerate(int(v) for v in args.seeds.split(",")):
@@ -277,10 +299,13 @@ def main() -> None:
             for row, on_pose in zip(rows, pose_switches(owners)):
                 row.update(on_pose)
             marked = [a + b for a, b in zip(marked, checked(posed, owners))]
-            for p, t0, t1, kind in switch_kinds(owners):
+            truths = true_people(scene)
+            for (p, t0, t1, kind), both in zip(switch_kinds(owners), on_two(posed, truths, owners, args.max_pose_dist)):
                 kinds[kind] = kinds.get(kind, 0) + 1
+                fitting_two += both
                 if args.why:
-                    print(f"  {n} people, s{seed}, true person {p}: frames {t0} -> {t1}, {kind}")
+                    print(f"  {n} people, s{seed}, true person {p}: frames {t0} -> {t1}, {kind}"
+                          f"{', the pose fits two people' if both else ''}")
             poses += sum(r["pose_switches"] for r in rows)
             carried += track_changes(owners, len(posed))
             pose_frames += sum(r["pose_frames"] for r in rows)
@@ -295,7 +320,8 @@ def main() -> None:
                         "seconds": seconds})  # fmt: skip
     print(f"identity switches {total} ({clear} over clear frames), covered {sum(covered) / max(len(covered), 1):.0%}, "
           f"false people {false_total}; poses on a true person {pose_frames} frames, their switches {poses} "
-          f"({', '.join(f'{k} {v}' for k, v in sorted(kinds.items()))}); in the frames marked to check "
+          f"({', '.join([f'{k} {v}' for k, v in sorted(kinds.items())] + [f'fitting two people {fitting_two}'])}); "
+          f"in the frames marked to check "
           f"{marked[0]}, marked {marked[1]} of {marked[2]} frames with a pose; a returned person's poses going "
           f"from one true person to another {carried}")
     if args.json:
