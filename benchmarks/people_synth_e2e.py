@@ -208,8 +208,9 @@ def switch_kinds(covering: list[list[int | None]]) -> list[tuple[int, int, int, 
 
 def on_two(posed: list, truths: list, covering: list[list[int | None]], max_dist: float) -> list[bool]:
     """Per switch of the poses (:func:`switch_kinds`' order): whether the pose before or after it
-    lies within ``max_dist`` of another true person as well as of its own (:func:`pose_distances`):
-    the two people stand where their joints nearly coincide, and the pose fits both."""
+    lies within ``max_dist`` of another true person (seen or hidden in that frame) as well as of its
+    own (:func:`pose_distances`): the two stand where their joints nearly coincide, and the pose fits
+    both. ``posed``: the returned people; ``truths``: every true person's PersonTruth."""
     out = []
     for p, t0, t1, _ in switch_kinds(covering):
         near = [pose_distances(posed[covering[p][t]], truths, t) < max_dist for t in (t0, t1)]
