@@ -6,6 +6,7 @@ import torch
 
 from lit_boot.core.people import Person
 from lit_boot.estimate import frame_ranges, frames_to_check, summary_line
+from lit_boot.estimate.id_checks import beside_line
 from lit_boot.estimate.people_pose import estimate_people
 from test_people_pose import crops, two_people
 
@@ -35,6 +36,18 @@ def test_overlaps_and_returns_are_marked_and_nothing_else():
     # B: first seen in frame 1 (after the clip's start), overlaps A in 3 (in 4 it has no pose),
     # back in 5 after a frame without a pose; frame 6 is clear
     assert marks_b.tolist() == [False, True, False, True, False, True, False]
+
+
+def test_the_why_line_names_who_is_beside_whom_in_video_frame_numbers():
+    xa, xb = [0, 10, 20, 30, 40, 50, 60], [120, 100, 80, 50, 40, 20, 0]  # as above: overlaps in 3 and 4
+    a = _person(0, xa, [True] * 7)
+    b = _person(7, xb, [False, True, True, True, False, True, True])
+    marks = frames_to_check([a, b])
+    numbers = [10 + t for t in range(7)]  # video frames 10-16
+    assert beside_line([a, b], marks, numbers) == ("person 0 beside 7 at 13-14; "
+                                                   "person 7 beside 0 at 13, new or back at 11, 15")
+    assert beside_line([a, b], [torch.zeros(7, dtype=torch.bool)] * 2, numbers) == ""
+    assert beside_line([], [], []) == ""
 
 
 def test_without_boxes_the_keypoints_extent_counts_and_a_person_without_keypoints_has_none():

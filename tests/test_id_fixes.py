@@ -13,6 +13,7 @@ from lit_boot.core.people import Person
 from lit_boot.data import load_scene, save_scene
 from lit_boot.data.readers import PoseEstimates, load_poses, save_poses
 from lit_boot.estimate import fix_ids, frames_to_check, id_sheet, parse_fix, sheet_rows
+from lit_boot.estimate.id_checks import beside_line
 from lit_boot.estimate.id_fixes import fix_estimates, fix_scene
 from lit_boot.estimate.id_sheet import MAIN_RGB, person_colour
 from lit_boot.synth import make_scene
@@ -171,6 +172,9 @@ def test_the_command_fixes_a_copy_and_draws_the_sheet(crossing, tmp_path, capsys
     assert main(["ids", str(tmp_path / "scene")]) == 0
     out = capsys.readouterr().out
     assert f"3 people (frames with them): {a} (8)" in out and "ids to check" in out and "--fix" in out
+    fixed_people = load_scene(tmp_path / "scene").people()  # why each frame is listed: who overlaps whom there
+    why = beside_line(fixed_people, frames_to_check(fixed_people), list(range(8)))
+    assert f"  why: {why}\n" in out and " beside " in why
     args = ["ids", str(tmp_path / "scene"), "--fix", f"swap {a} {b} at 4-", "--out", str(tmp_path / "fixed"),
             "--sheet", str(tmp_path / "ids.png")]  # fmt: skip
     assert main(args) == 0

@@ -76,6 +76,7 @@ def ids(argv: list[str]) -> int:
     args = ids_parser().parse_args(argv)
     is_scene = _check_args(args)
     from ..estimate import checks_line, frames_to_check
+    from ..estimate.id_checks import beside_line
 
     if is_scene:
         from ..data import load_scene, save_scene
@@ -106,6 +107,8 @@ def ids(argv: list[str]) -> int:
     line = checks_line([(p.track_id, [numbers[t] for t in m.nonzero().flatten().tolist()])
                         for p, m in zip(people, marks)])  # fmt: skip
     print(line or "no frame to check")
+    if line:
+        print(f"  why: {beside_line(people, marks, numbers)}")
     if line and not args.fix:
         print(f"  look at them (--sheet ids.png draws them), then: lit-boot ids {args.input} --fix \"swap A B at "
               f"FRAMES\" --out NEW (swap, join, split, drop: lit-boot ids --help)")  # fmt: skip

@@ -27,7 +27,8 @@ from ..core.people import Person
 from .pose_duplicates import keypoint_extent
 from .track_cost import box_overlaps
 
-__all__ = ["frames_to_check", "frame_ranges", "frame_numbers", "checks_line", "scene_checks", "OVERLAP_IOU"]
+__all__ = ["frames_to_check", "frame_ranges", "frame_numbers", "checks_line", "scene_checks", "beside_line",
+           "OVERLAP_IOU"]
 
 #: The box overlap (IoU) with another person from which a frame is one to check.
 OVERLAP_IOU = 0.3
@@ -73,6 +74,30 @@ def frames_to_check(people: Sequence[Person], min_iou: float = OVERLAP_IOU) -> l
                 check[after] = True  # back after frames without a pose
         out.append(check)
     return out
+
+
+def beside_line(people: Sequence[Person], marks: Sequence[torch.Tensor], numbers: Sequence[int],
+                min_iou: float = OVERLAP_IOU) -> str:  # fmt: skip
+    """Why each frame to check is one, for the swap a user may write: "person 1 beside 2 at 3-5, new
+    or back at 9; person 2 new or back at 1" for ``people`` and their ``marks``
+    (:func:`frames_to_check`), frame rows named by the video frame ``numbers``: the other people whose
+    boxes overlap the person's there (IoU ``min_iou``), else "new or back" (first seen after the
+    clip's start, or a pose again after frames without). "" where nothing is marked."""
+    if not people:
+        return ""
+    overlap = box_overlaps(torch.stack([_boxes(p) for p in people]), min_iou)  # (T, P, P)
+    parts = []
+    for i, (person, mark) in enumerate(zip(people, marks)):
+        rows = mark.nonzero().flatten().tolist()
+        if not rows:
+            continue
+        reasons = [f"beside {people[j].track_id} at {frame_ranges([numbers[t] for t in rows if overlap[t, i, j]])}"
+                   for j in range(len(people)) if any(bool(overlap[t, i, j]) for t in rows)]  # fmt: skip
+        alone = [numbers[t] for t in rows if not bool(overlap[t, i].any())]
+        if alone:
+            reasons.append(f"new or back at {frame_ranges(alone)}")
+        parts.append(f"person {person.track_id} {', '.join(reasons)}")
+    return "; ".join(parts)
 
 
 def frame_ranges(frames: Sequence[int], most: int = 6) -> str:
