@@ -206,13 +206,13 @@ def switch_kinds(covering: list[list[int | None]]) -> list[tuple[int, int, int, 
     return out
 
 
-def on_two(posed: list, truths: list, covering: list[list[int | None]], max_dist: float) -> list[bool]:
-    """Per switch of the poses (:func:`switch_kinds`' order): whether the pose before or after it
-    lies within ``max_dist`` of another true person (seen or hidden in that frame) as well as of its
-    own (:func:`pose_distances`): the two stand where their joints nearly coincide, and the pose fits
-    both. ``posed``: the returned people; ``truths``: every true person's PersonTruth."""
+def on_two(posed: list, truths: list, covering: list[list[int | None]], switches: list, max_dist: float) -> list[bool]:
+    """Per switch of the poses (``switches``: :func:`switch_kinds` of ``covering``): whether the pose
+    before or after it lies within ``max_dist`` of another true person (seen or hidden in that frame)
+    as well as of its own (:func:`pose_distances`): the two stand where their joints nearly coincide,
+    and the pose fits both. ``posed``: the returned people; ``truths``: every true person's PersonTruth."""
     out = []
-    for p, t0, t1, _ in switch_kinds(covering):
+    for p, t0, t1, _ in switches:
         near = [pose_distances(posed[covering[p][t]], truths, t) < max_dist for t in (t0, t1)]
         out.append(any(int(n.sum()) - int(n[p]) > 0 for n in near))
     return out
@@ -296,12 +296,13 @@ def main() -> None:
             seconds = time.perf_counter() - start
             found = torch.stack([p.person_boxes for p in posed]) if posed else torch.zeros(0, args.frames, 5)
             rows, false = score(found, truth, args.min_iou)
-            owners = pose_owners(posed, true_people(scene), truth[..., 4] > 0, args.max_pose_dist)
+            truths = true_people(scene)
+            owners = pose_owners(posed, truths, truth[..., 4] > 0, args.max_pose_dist)
             for row, on_pose in zip(rows, pose_switches(owners)):
                 row.update(on_pose)
             marked = [a + b for a, b in zip(marked, checked(posed, owners))]
-            truths = true_people(scene)
-            for (p, t0, t1, kind), both in zip(switch_kinds(owners), on_two(posed, truths, owners, args.max_pose_dist)):
+            switches = switch_kinds(owners)
+            for (p, t0, t1, kind), both in zip(switches, on_two(posed, truths, owners, switches, args.max_pose_dist)):
                 kinds[kind] = kinds.get(kind, 0) + 1
                 fitting_two += both
                 if args.why:
