@@ -215,6 +215,22 @@ def test_a_box_whose_pose_another_box_fits_better_is_dropped_before_tracking():
     assert torch.equal(est.person_boxes[3, :4], torch.tensor(loose[:4])) and est.found().all()
 
 
+def test_a_box_without_a_pose_beside_one_with_a_pose_is_not_tracked():
+    """A box beside A's, overlapping it (IoU 0.43) but not holding A's pose: its crop shows A, whose
+    pose lies outside it, so it has no pose; it is dropped before tracking in every frame (without
+    the rule it would make a track of its own) and A and B keep theirs."""
+    frames, _ = two_people()
+    frames[-1, :, 70, 128] = 0
+    frames[-1, :, 70, 150] = 200
+    a, beside, b = [20.0, 10.0, 60.0, 110.0, 0.9], [42.0, 10.0, 62.0, 110.0, 0.5], [135.0, 40.0, 165.0, 100.0, 0.8]
+    est = estimate_people(crops(frames), frames, KnownBoxes([[a, beside, b]] * 4), "all")
+    assert est.metadata["poseless_beside_posed"] == 4 and est.metadata["tracks"] == 2
+    assert est.num_people == 2 and [r["pose_frames"] for r in est.metadata["people"]] == [4, 4]
+    assert torch.equal(est.person_boxes[:, :4], torch.tensor([a[:4]] * 4))
+    alone = estimate_people(crops(frames), frames, KnownBoxes([[beside, b]] * 4), "all")
+    assert alone.metadata["poseless_beside_posed"] == 0 and alone.metadata["tracks"] == 2  # nothing beside: kept
+
+
 class ByBoxCentre:
     """An estimator whose crop shows a pose 30 x 80 px (``layout``) at the x that ``table[t]``
     gives for the box's centre: (centre x, pose x) pairs, the nearest centre's (nobody where the

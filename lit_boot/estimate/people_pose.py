@@ -15,9 +15,11 @@ keypoints' box (those inside the frame) lies inside the box (else the frame has 
 that person, counted in ``metadata["people"][i]["not_theirs"]``). One pose, one person
 (:mod:`.pose_duplicates`): before tracking, a detection whose crop gives the same pose as another
 detection's in that frame, with a box that fits the pose worse (a box around two overlapping
-people beside a box of one of them), is dropped (counted in ``metadata["duplicate_detections"]``);
-after, where two tracks' boxes overlap, a pose that looks like the other's (:mod:`.borrowed_poses`:
-the colours near its joints) counts for neither (``metadata["people"][i]["borrowed"]``), and then a
+people beside a box of one of them), is dropped (counted in ``metadata["duplicate_detections"]``),
+and so is a detection without a pose whose box overlaps one with a pose (:mod:`.poseless_boxes`: a
+person half hidden behind, or a second box; ``metadata["poseless_beside_posed"]``); after, where
+two tracks' boxes overlap, a pose that looks like the other's (:mod:`.borrowed_poses`: the colours
+near its joints) counts for neither (``metadata["people"][i]["borrowed"]``), and then a
 pose two tracks' crops both give counts for the track whose box there is a detection
 rather than the tracker's guess across a gap (:func:`bridged_frames`), else for the one whose box
 fits it best (the other's frames counted in ``metadata["people"][i]["duplicates"]``). A track on which no pose is
@@ -43,6 +45,7 @@ from .looks import detection_looks
 from .people_track import select_people, track_people
 from .person_track import frame_detections
 from .pose_duplicates import duplicate_detections, duplicate_frames
+from .poseless_boxes import poseless_beside_posed
 from .tracking import body_box
 
 __all__ = ["estimate_people", "detection_keypoints", "pose_in_box", "PersonPoseEstimator", "MediaPipeCrops",
@@ -209,6 +212,12 @@ def detection_keypoints(estimator: PersonPoseEstimator, frames: torch.Tensor,
     return [torch.stack(r) if r else torch.zeros(0, K, 3) for r in rows]
 
 
+def _without(detections: list[torch.Tensor], keypoints: list[torch.Tensor],
+             drop: list[torch.Tensor]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:  # fmt: skip
+    """The per-frame detections (N_t, 5) and their keypoints (N_t, K, 3) without those ``drop`` marks."""
+    return [d[~x] for d, x in zip(detections, drop)], [k[~x] for k, x in zip(keypoints, drop)]
+
+
 def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detector: Any, people: str | int,
                     meta: dict[str, Any] | None = None) -> PoseEstimates:  # fmt: skip
     """Every tracked person's estimates in frames (T, 3, H, W) uint8 RGB (module docstring).
@@ -222,8 +231,9 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
     detections = frame_detections(detector, frames)
     keypoints = detection_keypoints(estimator, frames, detections)
     doubled = duplicate_detections(detections, keypoints)  # a box around two people beside one of theirs
-    detections = [d[~drop] for d, drop in zip(detections, doubled)]
-    keypoints = [k[~drop] for k, drop in zip(keypoints, doubled)]
+    detections, keypoints = _without(detections, keypoints, doubled)
+    poseless = poseless_beside_posed(detections, keypoints)  # a hidden person's or a second box, no pose
+    detections, keypoints = _without(detections, keypoints, poseless)
     looks = detection_looks(frames, detections, keypoints)
     tracks = select_people(track_people(detections, keypoints=keypoints, looks=looks), people)
     found = [_one_person(estimator, frames, boxes) for boxes in tracks]
@@ -244,6 +254,7 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
         records[est.track_id]["check_ids"] = est.frame_indices[check].tolist()
     meta = {**(meta or {}), "people": records, "people_asked": people, "tracks": len(tracks),
             "duplicate_detections": int(sum(int(d.sum()) for d in doubled)),
+            "poseless_beside_posed": int(sum(int(d.sum()) for d in poseless)),
             "people_without_pose": [r["track_id"] for r in records if not r["pose_frames"]]}  # fmt: skip
     if not with_pose:
         nobody = estimator.estimate_person(frames, torch.zeros(frames.shape[0], 5))
