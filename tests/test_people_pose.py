@@ -218,7 +218,7 @@ def test_a_box_whose_pose_another_box_fits_better_is_dropped_before_tracking():
 def test_a_box_without_a_pose_beside_one_with_a_pose_is_not_tracked():
     """A box beside A's, overlapping it (IoU 0.43) but not holding A's pose: its crop shows A, whose
     pose lies outside it, so it has no pose; it is dropped before tracking in every frame (without
-    the rule it would make a track of its own) and A and B keep theirs."""
+    the rule it makes a third track, one without a pose) and A and B keep theirs."""
     frames, _ = two_people()
     frames[-1, :, 70, 128] = 0
     frames[-1, :, 70, 150] = 200

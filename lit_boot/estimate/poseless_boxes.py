@@ -10,7 +10,7 @@ switches 20 -> 17 and 18 -> 12 over 120 people; BENCHMARKS.md, "A box without a 
 a pose, held out of tracking"). :func:`poseless_beside_posed` finds such boxes so that they are
 dropped before tracking; a hidden person's track is bridged across the frames it loses, as any gap.
 A box that holds the posed box (at least :data:`HOLDS` of the posed box's area inside it) is kept:
-it may be a person's beside whose smaller box with a pose lies inside it (a man walking beside a
+it may be a person's own box with a smaller posed box inside it (the man walking beside the main
 woman on the shared street clip). Boxes are x0, y0, x1, y1 px (:mod:`.detector`).
 """
 
