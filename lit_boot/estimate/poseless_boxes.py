@@ -20,7 +20,7 @@ from collections.abc import Sequence
 
 import torch
 
-from .track_cost import KEYPOINT_CONF, KEYPOINT_MIN_JOINTS, iou_matrix
+from .track_cost import KEYPOINT_CONF, KEYPOINT_MIN_JOINTS, box_areas, box_intersections, iou_matrix
 
 __all__ = ["poseless_beside_posed", "inside_share", "OVERLAP", "HOLDS"]
 
@@ -33,10 +33,7 @@ HOLDS = 0.9
 
 def inside_share(outer: torch.Tensor, inner: torch.Tensor) -> torch.Tensor:
     """(N, M): the share of each ``inner`` box's area (M, 4) that lies inside each ``outer`` box (N, 4)."""
-    width = (torch.minimum(outer[:, None, 2], inner[None, :, 2]) - torch.maximum(outer[:, None, 0], inner[None, :, 0]))
-    height = (torch.minimum(outer[:, None, 3], inner[None, :, 3]) - torch.maximum(outer[:, None, 1], inner[None, :, 1]))
-    area = ((inner[:, 2] - inner[:, 0]) * (inner[:, 3] - inner[:, 1])).clamp_min(1e-6)
-    return width.clamp_min(0) * height.clamp_min(0) / area[None]
+    return box_intersections(outer, inner) / box_areas(inner).clamp_min(1e-6)[None]
 
 
 def poseless_beside_posed(detections: Sequence[torch.Tensor], keypoints: Sequence[torch.Tensor]) -> list[torch.Tensor]:

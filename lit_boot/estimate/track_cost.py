@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-__all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "iou_matrix", "box_overlaps", "MISS_COST",
-           "SMOOTHING", "KEYPOINT_WEIGHT"]
+__all__ = ["TrackState", "pair_costs", "box_centre", "box_side", "iou_matrix", "box_areas", "box_intersections",
+           "box_overlaps", "MISS_COST", "SMOOTHING", "KEYPOINT_WEIGHT"]
 
 #: The cost of leaving a track or a detection unmatched in a frame (the box terms of a pair lie in [0, 2]).
 MISS_COST = 1.0
@@ -131,13 +131,22 @@ def box_side(box: torch.Tensor) -> torch.Tensor:
     return (box[..., 2:4] - box[..., :2]).amax(-1).clamp_min(1.0)
 
 
-def iou_matrix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """IoU (N, M) of boxes a (N, 4) and b (M, 4)."""
+def box_areas(boxes: torch.Tensor) -> torch.Tensor:
+    """Areas (N,) px^2 of boxes (N, 4 or more), 0 where a side is negative."""
+    return (boxes[:, 2:4] - boxes[:, :2]).clamp_min(0).prod(-1)
+
+
+def box_intersections(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Areas (N, M) px^2 of the intersections of boxes a (N, 4) and b (M, 4)."""
     lo = torch.maximum(a[:, None, :2], b[None, :, :2])
     hi = torch.minimum(a[:, None, 2:4], b[None, :, 2:4])
-    inter = (hi - lo).clamp_min(0).prod(-1)
-    area = lambda x: (x[:, 2:4] - x[:, :2]).clamp_min(0).prod(-1)  # noqa: E731
-    return inter / (area(a)[:, None] + area(b)[None, :] - inter).clamp_min(1e-9)
+    return (hi - lo).clamp_min(0).prod(-1)
+
+
+def iou_matrix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """IoU (N, M) of boxes a (N, 4) and b (M, 4)."""
+    inter = box_intersections(a, b)
+    return inter / (box_areas(a)[:, None] + box_areas(b)[None, :] - inter).clamp_min(1e-9)
 
 
 def box_overlaps(boxes: torch.Tensor, min_iou: float) -> torch.Tensor:
