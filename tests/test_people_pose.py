@@ -389,3 +389,24 @@ def test_a_track_is_followed_in_video_mode_and_the_static_crops_fill_where_it_fo
     dx = (est.keypoints2d - static.keypoints2d)[..., 0].mean(-1)  # per frame, video minus static, px
     assert (dx[[0, 3]] > 1).all()  # the followed poses, shifted right
     assert torch.equal(est.keypoints2d[2], static.keypoints2d[2])  # followed out of the box: the static crop's
+
+
+def test_a_persons_poses_going_on_on_a_new_track_are_joined(monkeypatch):
+    """A stands at x = 100; the detector's box around A is small in frames 0-2 and the whole frame
+    in 3-5 (more than max_scale apart: the tracker starts a new track). Each track's crops show A's
+    pose: the poses end on one track and go on, unchanged, on the other, and they are joined into
+    one person with a pose in every frame (without the rule: two people, three frames each)."""
+    import lit_boot.estimate.pose_handover as handover
+
+    small, whole = [90.0, 40.0, 110.0, 80.0, 0.9], [0.0, 0.0, W - 1.0, H - 1.0, 0.9]
+    detector = KnownBoxes([[small]] * 3 + [[whole]] * 3)
+    frames = torch.zeros(6, 3, H, W, dtype=torch.uint8)
+    est = estimate_people(OnWhoeverIsThere([[100.0]] * 6), frames, detector, "all")
+    assert est.num_people == 1 and est.metadata["tracks"] == 2
+    assert (est.keypoints_conf > 0).any(-1).all() and est.metadata["pose_handovers"][0].startswith("swap ")
+    assert torch.equal(est.person_boxes[:, :4], torch.tensor([small[:4]] * 3 + [whole[:4]] * 3))
+    assert sorted(r["pose_frames"] for r in est.metadata["people"]) == [0, 6]
+    monkeypatch.setattr(handover, "MAX_STEP", 0.0)
+    apart = estimate_people(OnWhoeverIsThere([[100.0]] * 6), frames, detector, "all")
+    assert apart.num_people == 2 and [int((p.keypoints_conf > 0).any(-1).sum()) for p in apart.people()] == [3, 3]
+    assert apart.metadata["pose_handovers"] == []

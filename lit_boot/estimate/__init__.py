@@ -68,6 +68,7 @@ from .people_pose import (
     mask_frames,
     pose_in_box,
 )
+from .pose_handover import continue_poses
 from .people_track import PEOPLE_CHOICES, parse_people, select_people, track_people
 from .person_track import main_person_boxes, person_boxes
 from .tracking import JUMP_POLICIES, drop_jumps, find_jumps
@@ -122,6 +123,7 @@ __all__ = [
     "detection_looks",
     "look_distance",
     "borrowed_frames",
+    "continue_poses",
     "frames_to_check",
     "frame_ranges",
     "checks_line",

@@ -22,7 +22,9 @@ two tracks' boxes overlap, a pose that looks like the other's (:mod:`.borrowed_p
 near its joints) counts for neither (``metadata["people"][i]["borrowed"]``), and then a
 pose two tracks' crops both give counts for the track whose box there is a detection
 rather than the tracker's guess across a gap (:func:`bridged_frames`), else for the one whose box
-fits it best (the other's frames counted in ``metadata["people"][i]["duplicates"]``). A track on which no pose is
+fits it best (the other's frames counted in ``metadata["people"][i]["duplicates"]``). Where one track's poses end and
+another's begin just after, continuing them, the two trade their frames from there on (:mod:`.pose_handover`: one
+person's poses stay on one track; ``metadata["pose_handovers"]`` says what was traded). A track on which no pose is
 found in any frame is left out (``metadata["people_without_pose"]``). The frames where a person's id may have switched
 (:func:`~.id_checks.frames_to_check`) are listed in ``metadata["people"][i]["check_ids"]`` (video frame numbers).
 Person 0 (the main person) is the most prominent track with a pose; track ids number the tracks by prominence.
@@ -45,6 +47,7 @@ from .looks import detection_looks
 from .people_track import select_people, track_people
 from .person_track import frame_detections
 from .pose_duplicates import duplicate_detections, duplicate_frames
+from .pose_handover import continue_poses
 from .poseless_boxes import poseless_beside_posed
 from .tracking import body_box
 
@@ -250,14 +253,30 @@ def estimate_people(estimator: PersonPoseEstimator, frames: torch.Tensor, detect
                         "pose_frames": int(est.found().sum()), "not_theirs": not_theirs,
                         "duplicates": int(twice.sum()), "borrowed": int(lent.sum())})  # fmt: skip
     with_pose = [est for est in estimates if bool(est.found().any())]
-    for est, check in zip(with_pose, frames_to_check([Person.of(est) for est in with_pose])):
-        records[est.track_id]["check_ids"] = est.frame_indices[check].tolist()
+    found, handed = _handed_over(with_pose, records)
     meta = {**(meta or {}), "people": records, "people_asked": people, "tracks": len(tracks),
             "duplicate_detections": int(sum(int(d.sum()) for d in doubled)),
-            "poseless_beside_posed": int(sum(int(d.sum()) for d in poseless)),
+            "poseless_beside_posed": int(sum(int(d.sum()) for d in poseless)), "pose_handovers": handed,
             "people_without_pose": [r["track_id"] for r in records if not r["pose_frames"]]}  # fmt: skip
     if not with_pose:
         nobody = estimator.estimate_person(frames, torch.zeros(frames.shape[0], 5))
         return replace(nobody, person_boxes=tracks[0] if len(tracks) else None, metadata={**nobody.metadata, **meta})
-    main = with_pose[0]
-    return replace(main, metadata={**main.metadata, **meta}, others=tuple(Person.of(est) for est in with_pose[1:]))
+    return with_pose[0].with_people(found, metadata={**with_pose[0].metadata, **meta})
+
+
+def _handed_over(with_pose: list[PoseEstimates], records: list[dict]) -> tuple[list[Person], list[str]]:
+    """The tracks with a pose (``with_pose``, in prominence order) as people, each person's poses
+    handed from one track to the next joined (:func:`~.pose_handover.continue_poses`) and those left
+    without a pose dropped; ``records`` (one per track, by track id) updated in place with each one's
+    pose frames and frames to check. Returns the people and what the hand-overs did."""
+    if not with_pose:
+        return [], []
+    numbers = with_pose[0].frame_indices.tolist()
+    found, handed = continue_poses([Person.of(est) for est in with_pose], numbers)
+    found = [p for p in found if bool((p.keypoints_conf > 0).any())]
+    for record in records:
+        record["pose_frames"] = 0
+    for person, check in zip(found, frames_to_check(found)):
+        records[person.track_id]["pose_frames"] = int((person.keypoints_conf > 0).any(-1).sum())
+        records[person.track_id]["check_ids"] = [numbers[t] for t in check.nonzero().flatten().tolist()]
+    return found, handed
