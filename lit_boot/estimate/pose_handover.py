@@ -68,15 +68,17 @@ def handovers(people: Sequence[Person]) -> list[tuple[float, int, int, int]]:
     found = []
     for i, a in enumerate(people):
         for j, b in enumerate(people):
-            if i != j and (step := _step(a, b)) is not None:
-                found.append((step[1], step[2], step[0], i, j))
+            if i != j and (link := _step(a, b)) is not None:
+                step, last, first = link
+                found.append((last, first, step, i, j))
     return [(step, i, j, last) for last, _, step, i, j in sorted(found)]
 
 
 def continue_poses(people: Sequence[Person], numbers: Sequence[int]) -> tuple[list[Person], list[str]]:
-    """``people`` with each hand-over joined (:func:`handovers`, the closest first, found again after
-    each), ``numbers`` (T,) the frames' video frame numbers; and one line per hand-over saying what it
-    did (:func:`~.id_fixes.fix_ids`' words). People left with no pose and no box go."""
+    """``people`` with each hand-over joined (:func:`handovers`, the first one each time, found again
+    after each), ``numbers`` (T,) the frames' video frame numbers; and what the hand-overs did
+    (:func:`~.id_fixes.fix_ids`' lines: each swap, and each person left with no pose and no box,
+    who goes)."""
     people, said = list(people), []
     for _ in range(len(people)):
         found = handovers(people)
