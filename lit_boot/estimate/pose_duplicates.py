@@ -21,7 +21,7 @@ import torch
 
 from .track_cost import iou_matrix
 
-__all__ = ["duplicate_frames", "duplicate_detections", "keypoint_extent", "MAX_DISTANCE", "MIN_JOINTS"]
+__all__ = ["duplicate_frames", "duplicate_detections", "keypoint_extent", "pose_apart", "MAX_DISTANCE", "MIN_JOINTS"]
 
 #: Two poses are one where their shared joints' median distance is below this share of the pose's
 #: size (the larger side of its confident keypoints' extent).
@@ -36,6 +36,19 @@ def keypoint_extent(keypoints: torch.Tensor, confident: torch.Tensor) -> torch.T
     """(4,) x0, y0, x1, y1 of the confident keypoints (K, 2)."""
     points = keypoints[confident]
     return torch.cat([points.amin(0), points.amax(0)])
+
+
+def pose_apart(keypoints_a: torch.Tensor, confident_a: torch.Tensor, keypoints_b: torch.Tensor,
+               confident_b: torch.Tensor) -> float | None:  # fmt: skip
+    """How far pose B (keypoints (K, 2) px, confident (K,) bool) lies from pose A: the median
+    distance of the joints confident in both over A's size (the larger side of its confident
+    keypoints' extent); None where they share fewer than MIN_JOINTS."""
+    shared = confident_a & confident_b
+    if int(shared.sum()) < MIN_JOINTS:
+        return None
+    extent = keypoint_extent(keypoints_a, confident_a)
+    size = float((extent[2:] - extent[:2]).max().clamp_min(1.0))
+    return float((keypoints_a[shared] - keypoints_b[shared]).norm(dim=-1).median()) / size
 
 
 def duplicate_frames(
@@ -56,15 +69,12 @@ def duplicate_frames(
         confident = [confidence[p][t] > CONF for p in range(P)]
         for a in range(P):
             for b in range(a + 1, P):
-                shared = confident[a] & confident[b]
-                if int(shared.sum()) < MIN_JOINTS or drop[a][t] or drop[b][t]:
+                if drop[a][t] or drop[b][t]:
                     continue
-                pose = keypoint_extent(keypoints[a][t], confident[a])
-                size = float((pose[2:] - pose[:2]).max().clamp_min(1.0))
-                apart = (keypoints[a][t, shared] - keypoints[b][t, shared]).norm(dim=-1).median()
-                if float(apart) >= MAX_DISTANCE * size:
+                apart = pose_apart(keypoints[a][t], confident[a], keypoints[b][t], confident[b])
+                if apart is None or apart >= MAX_DISTANCE:
                     continue
-                other = keypoint_extent(keypoints[b][t], confident[b])
+                pose, other = (keypoint_extent(keypoints[p][t], confident[p]) for p in (a, b))
                 fit_a, fit_b = (float(iou_matrix(extent[None], boxes[p][t, None, :4])[0, 0])
                                 for p, extent in ((a, pose), (b, other)))  # fmt: skip
                 if bridged is not None and bool(bridged[a][t]) != bool(bridged[b][t]):

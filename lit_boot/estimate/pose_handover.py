@@ -20,11 +20,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import torch
-
 from ..core.people import Person
 from .id_fixes import IdFix, fix_ids
-from .pose_duplicates import CONF, MIN_JOINTS, keypoint_extent
+from .pose_duplicates import CONF, MIN_JOINTS, pose_apart
 
 __all__ = ["handovers", "continue_poses", "MAX_GAP", "MAX_STEP"]
 
@@ -43,21 +41,15 @@ def _posed_rows(person: Person) -> list[int]:
     return ((person.keypoints_conf > CONF).sum(-1) >= MIN_JOINTS).nonzero().flatten().tolist()
 
 
-def _step(a: Person, b: Person) -> tuple[float, int, int] | None:
-    """(step, A's last posed row, B's first) where B's first pose continues A's last (module docstring), else None."""
-    rows_a, rows_b = _posed_rows(a), _posed_rows(b)
-    if not rows_a or not rows_b or not 0 < rows_b[0] - rows_a[-1] <= MAX_GAP:
+def _step(a: Person, b: Person, last: int, first: int) -> float | None:
+    """How far B's pose in row ``first`` lies from A's in row ``last``, in A's pose sizes per frame
+    between them; None where it does not continue it (module docstring)."""
+    if not 0 < first - last <= MAX_GAP:
         return None
-    last, first = rows_a[-1], rows_b[0]
-    confident_a = a.keypoints_conf[last] > CONF
-    shared = confident_a & (b.keypoints_conf[first] > CONF)
-    if int(shared.sum()) < MIN_JOINTS:
-        return None
-    extent = keypoint_extent(a.keypoints2d[last], confident_a)
-    size = float((extent[2:] - extent[:2]).max().clamp_min(1.0))
-    apart = float((a.keypoints2d[last, shared] - b.keypoints2d[first, shared]).norm(dim=-1).median())
-    step = apart / size / (first - last)
-    return (step, last, first) if step < MAX_STEP else None
+    apart = pose_apart(a.keypoints2d[last], a.keypoints_conf[last] > CONF,
+                       b.keypoints2d[first], b.keypoints_conf[first] > CONF)  # fmt: skip
+    step = None if apart is None else apart / (first - last)
+    return step if step is not None and step < MAX_STEP else None
 
 
 def handovers(people: Sequence[Person]) -> list[tuple[float, int, int, int]]:
@@ -65,11 +57,14 @@ def handovers(people: Sequence[Person]) -> list[tuple[float, int, int, int]]:
     the second's poses continue the first's (module docstring), as (step, index of A, index of B,
     A's last posed row): the earliest hand-over first (A's last pose, then B's first), then the
     closest (a pose handed on twice is followed in time)."""
+    rows = [_posed_rows(p) for p in people]
     found = []
     for i, a in enumerate(people):
         for j, b in enumerate(people):
-            if i != j and (link := _step(a, b)) is not None:
-                step, last, first = link
+            if i == j or not rows[i] or not rows[j]:
+                continue
+            last, first = rows[i][-1], rows[j][0]
+            if (step := _step(a, b, last, first)) is not None:
                 found.append((last, first, step, i, j))
     return [(step, i, j, last) for last, _, step, i, j in sorted(found)]
 
