@@ -21,13 +21,16 @@ in --seeds, as benchmarks/people_synth_tracking.py).
 Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_e2e.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--height 256] [--width 512] [--min-iou 0.3] [--min-pixels 50]
            [--detector ../shared/checkpoints/yolox_nano.onnx] [--det-score 0.25] [--det-iou 0.45]
-           [--on-jump keep] [--max-jump 0.5] [--why] [--true-boxes]
+           [--on-jump keep] [--max-jump 0.5] [--why] [--true-boxes] [--true-poses]
            [--json out.json]
 
 With ``--true-boxes`` the detector is replaced by the true people's visible boxes (each person's
 seen pixels' extent wherever at least --min-pixels are seen, score 1: a detector that never
 merges two people nor misses one), so that what is left is the pose estimator's and the
-tracker's; everything else as above.
+tracker's; everything else as above. With ``--true-poses`` MediaPipe is replaced by a perfect
+top-down pose estimator (:mod:`true_crop_poses`: each crop gives the true pose of the person most
+seen in its box; --on-jump and --max-jump do not apply), so that what is left is the detector's and
+the tracker's (with ``--true-boxes`` too, the tracker's alone).
 
 The first line names the installed versions of the packages the counts move with (another install
 gave other counts for the same code: BENCHMARKS.md, "A borrowed pose"). The last line sums the
@@ -48,17 +51,22 @@ from pathlib import Path
 import torch
 from scipy.optimize import linear_sum_assignment
 
-from lit_boot.estimate import PersonBoxDetector, PersonDetector, estimate_poses, frames_to_check
+from lit_boot.estimate import PersonBoxDetector, PersonDetector, estimate_people, estimate_poses, frames_to_check
 from lit_boot.estimate.track_cost import iou_matrix
 from lit_boot.synth import make_scene
 from people_synth_tracking import MOTIONS, scene_parser, true_people
 from real_data import SHARED
+from true_crop_poses import TrueCropPoses
 
 
-def returned_people(scene, detector: PersonBoxDetector, **options) -> list:
+def returned_people(scene, detector: PersonBoxDetector, true_poses: bool = False, **options) -> list:
     """The people ``estimate_poses(scene.frames, people="all", detector=detector, **options)``
-    returns with a pose in some frame (Person, each with its boxes), as a user's run gives them."""
-    every = estimate_poses(scene.frames, people="all", detector=detector, **options)
+    returns with a pose in some frame (Person, each with its boxes), as a user's run gives them;
+    with ``true_poses``, ``estimate_people`` with :class:`true_crop_poses.TrueCropPoses` instead."""
+    if true_poses:
+        every = estimate_people(TrueCropPoses(scene), scene.frames, detector, "all")
+    else:
+        every = estimate_poses(scene.frames, people="all", detector=detector, **options)
     return [p for p in every.people() if p.person_boxes is not None and p.keypoints_conf.amax() > 0]
 
 
@@ -275,6 +283,8 @@ def main() -> None:
     parser.add_argument("--why", action="store_true", help="print each switch of the poses and its kind")
     parser.add_argument("--true-boxes", action="store_true",
                         help="the true people's visible boxes in place of the detector (module docstring)")
+    parser.add_argument("--true-poses", action="store_true",
+                        help="a perfect top-down pose estimator in place of MediaPipe (module docstring)")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
     detector = PersonDetector(args.detector, score=args.det_score, iou=args.det_iou)
@@ -291,7 +301,7 @@ def main() -> None:
                                motion=MOTIONS[i % len(MOTIONS)])  # fmt: skip
             truth = visible_boxes(scene, args.min_pixels)
             start = time.perf_counter()
-            posed = returned_people(scene, TrueBoxes(truth) if args.true_boxes else detector,
+            posed = returned_people(scene, TrueBoxes(truth) if args.true_boxes else detector, args.true_poses,
                                     on_jump=args.on_jump, max_jump=args.max_jump)  # fmt: skip
             seconds = time.perf_counter() - start
             found = torch.stack([p.person_boxes for p in posed]) if posed else torch.zeros(0, args.frames, 5)
