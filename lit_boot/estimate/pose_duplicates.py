@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 import torch
 
-from .track_cost import iou_matrix
+from .track_cost import KEYPOINT_CONF, KEYPOINT_MIN_JOINTS, iou_matrix
 
 __all__ = ["duplicate_frames", "duplicate_detections", "keypoint_extent", "pose_apart", "MAX_DISTANCE", "MIN_JOINTS"]
 
@@ -27,9 +27,9 @@ __all__ = ["duplicate_frames", "duplicate_detections", "keypoint_extent", "pose_
 #: size (the larger side of its confident keypoints' extent).
 MAX_DISTANCE = 0.1
 #: The joints (confident in both poses) that must be shared to compare two poses, and the
-#: confidence above which a joint counts.
-MIN_JOINTS = 4
-CONF = 0.3
+#: confidence above which a joint counts: the tracker's own (:mod:`.track_cost`).
+MIN_JOINTS = KEYPOINT_MIN_JOINTS
+CONF = KEYPOINT_CONF
 
 
 def keypoint_extent(keypoints: torch.Tensor, confident: torch.Tensor) -> torch.Tensor:
