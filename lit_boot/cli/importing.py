@@ -105,6 +105,9 @@ def import_parser(kinds: Iterable[str] | None = None) -> ArgumentParser:
                               "tracks (top-down; --detector defaults to yolox_nano); with --poses (COCO keypoints, "
                               "DCPose): every person of the file, linked by its track ids or the tracker; unset: one "
                               "person")  # fmt: skip
+        sub.add_argument("--pose_model", type=str | None, default=None,
+                         help="with --estimate: a top-down SimCC pose model exported to ONNX (RTMPose's; a local "
+                              ".onnx path) in MediaPipe's place on each person's crops, 2D keypoints only")  # fmt: skip
         sub.add_argument("--out", type=Path, required=True, help="scene folder to write")
         sub.add_argument("--overwrite", type=bool, default=False, help="replace an existing scene folder")
         subcommands.add_subcommand(kind, sub, help=describe(kind))
@@ -116,10 +119,16 @@ def _add_reader_arguments(parser: ArgumentParser, kind: str) -> None:
     set_help(parser, {**ARG_HELP, **ARG_HELP_BY_KIND.get(kind, {})})  # the readers' docstrings are prose, no "Args:"
 
 
-def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None = None, people: str | None = None):
+def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None = None, people: str | None = None,
+               pose_model: str | None = None):  # fmt: skip
     """``scene`` with estimates from the file ``poses`` or from MediaPipe (``estimate``, with the
-    person ``detector``'s boxes when given, for every tracked person with ``people``; a scene in
-    which nobody is found raises :class:`~lit_boot.estimate.NoPersonFound`)."""
+    person ``detector``'s boxes when given, for every tracked person with ``people``; with
+    ``pose_model``, that ONNX model in MediaPipe's place; a scene in which nobody is found raises
+    :class:`~lit_boot.estimate.NoPersonFound`)."""
+    if pose_model is not None and not estimate:
+        raise ValueError("--pose_model: needs --estimate true (it estimates the poses in MediaPipe's place)")
+    if pose_model is not None and not Path(pose_model).is_file():
+        raise ValueError(f"--pose_model {pose_model}: no such file (a SimCC pose model exported to ONNX)")
     if poses is not None and estimate:
         raise ValueError("--poses and --estimate: give one of them, not both")
     if detector is not None and not estimate:
@@ -132,7 +141,7 @@ def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None =
         from ..estimate import estimate_poses, require_person
 
         with drop_native_noise():  # MediaPipe's native start-up lines
-            est = estimate_poses(scene.frames, detector=detector, people=people)
+            est = estimate_poses(scene.frames, detector=detector, people=people, pose_model=pose_model)
         return require_person(est, f"scene {scene.name!r}").apply_to(scene)  # nobody: no pose to bootstrap
     return scene
 
@@ -161,7 +170,7 @@ def import_scene(argv: list[str]) -> int:
     from ..data import save_scene
 
     poses, estimate, detector = options.pop("poses"), options.pop("estimate"), options.pop("detector")
-    people = options.pop("people")
+    people, pose_model = options.pop("people"), options.pop("pose_model")
     if people is not None:
         _check_people(people)
     out, overwrite = options.pop("out"), options.pop("overwrite")
@@ -169,13 +178,15 @@ def import_scene(argv: list[str]) -> int:
     if args.kind == "video" and not estimate:  # read_video selects and checks the pose rows itself
         if detector is not None:
             raise CliError("--detector: needs --estimate true (it adds the person's boxes to the estimated poses)")
+        if pose_model is not None:
+            raise CliError("--pose_model: needs --estimate true (it estimates the poses in MediaPipe's place)")
         if people is not None and poses is None:
             raise CliError("--people: needs --estimate true or --poses (every person's pose comes from one of them)")
         if people is not None:  # every person of the file; else read_video reads it (its errors name the file)
             poses = read_pose_file(poses, people)
         scene = _reader("video")(**options, poses=poses)
     else:
-        scene = with_poses(_reader(args.kind)(**options), poses, estimate, detector, people)
+        scene = with_poses(_reader(args.kind)(**options), poses, estimate, detector, people, pose_model)
     save_scene(scene, out, overwrite=overwrite)
     print(scene.summary())
     from ..estimate import checks_line, scene_checks
@@ -212,6 +223,10 @@ def estimate_pose_parser() -> ArgumentParser:
                         help="all, largest or a number N: a pose for every person the detector tracks (top-down: "
                              "MediaPipe on each person's crops; --detector defaults to yolox_nano), the most "
                              "prominent first; unset: one person, MediaPipe on the whole frames")  # fmt: skip
+    parser.add_argument("--pose_model", type=str | None, default=None,
+                        help="a top-down pose model exported to ONNX with a SimCC head (RTMPose's; a local .onnx "
+                             "path) in MediaPipe's place on each person's crops: 2D keypoints only (bootstrap with "
+                             "--mode 2d); --people defaults to largest")  # fmt: skip
     parser.add_argument("--overwrite", type=bool, nargs="?", const=True, default=False, help="replace --out")
     return parser
 
@@ -224,13 +239,15 @@ def estimate_pose(argv: list[str]) -> int:
         raise CliError(f"VIDEO {args.video}: no such video file or folder of frames")
     if args.people is not None:
         _check_people(args.people)
-    from ..estimate import MediaPipeUnavailable, estimate_pose_file
+    if args.pose_model is not None and not Path(args.pose_model).is_file():
+        raise CliError(f"--pose_model {args.pose_model}: no such file (a SimCC pose model exported to ONNX)")
+    from ..estimate import MediaPipeUnavailable, OnnxRuntimeUnavailable, estimate_pose_file
 
     options = {k: v for k, v in vars(args).items() if k not in ("video", "out", "overwrite")}
     try:
         with drop_native_noise():
             _, summary = estimate_pose_file(args.video, args.out, overwrite=args.overwrite, **options)
-    except MediaPipeUnavailable as err:
+    except (MediaPipeUnavailable, OnnxRuntimeUnavailable) as err:
         raise CliError(str(err)) from None
     print(f"{summary}; wrote {args.out}")
     return 0

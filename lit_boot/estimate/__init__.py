@@ -20,6 +20,8 @@ first, the others in ``PoseEstimates.others``).
 :class:`PersonPoseEstimator` (``estimate_person(frames, boxes)``, ``keep_frames(estimates,
 keep)``; MediaPipe's is :class:`MediaPipeCrops`) on every tracked person; where two people's
 boxes overlap, a pose whose look is the other's counts for neither (``borrowed_frames``).
+``estimate_poses(..., pose_model="rtmpose-m.onnx")`` puts a top-down SimCC model exported to ONNX
+(RTMPose's; a local path) in MediaPipe's place on each person's crops (:class:`OnnxPoseCrops`, 2D only).
 ``read_tracked_estimates(path)`` reads every person of an external COCO keypoint or DCPose file,
 linked into tracks by the file's track ids or by the same tracker. ``frames_to_check(people)``
 marks, per person, the frames where its id may have switched (people overlapping, or found again);
@@ -68,6 +70,7 @@ from .people_pose import (
     mask_frames,
     pose_in_box,
 )
+from .onnx_pose import OnnxPoseCrops, SimccPoseModel, estimate_onnx_people
 from .pose_handover import continue_poses
 from .people_track import PEOPLE_CHOICES, parse_people, select_people, track_people
 from .person_track import main_person_boxes, person_boxes
@@ -86,6 +89,9 @@ __all__ = [
     "link_keypoint_people",
     "PersonPoseEstimator",
     "MediaPipeCrops",
+    "OnnxPoseCrops",
+    "SimccPoseModel",
+    "estimate_onnx_people",
     "mask_frames",
     "read_tracked_estimates",
     "INSTALL_HINT",

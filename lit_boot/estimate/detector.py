@@ -26,6 +26,7 @@ import logging
 import os
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 import cv2
@@ -75,6 +76,26 @@ def import_onnxruntime() -> Any:
             f"the person detector needs onnxruntime ({err}); install it with: {ORT_INSTALL_HINT}"
         ) from err
     return onnxruntime
+
+
+def open_session(path: Path, threads: int | None, providers: Sequence[str]) -> Any:
+    """An onnxruntime session of the model file ``path``: ``threads`` intra-op threads (None:
+    ``torch.get_num_threads()``, which follows ``OMP_NUM_THREADS``), ``providers`` in order of
+    preference; onnxruntime's own warnings silenced. A file onnxruntime cannot load raises a
+    ValueError naming it."""
+    ort = import_onnxruntime()
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads or torch.get_num_threads()
+    options.inter_op_num_threads = 1
+    options.log_severity_level = 3  # errors only: onnxruntime's warnings are not lit-boot's output
+    missing = [p for p in providers if p not in ort.get_available_providers()]
+    if missing or not providers:
+        raise ValueError(f"providers: expected some of {ort.get_available_providers()}, got {list(providers)}")
+    try:
+        return ort.InferenceSession(str(path), sess_options=options, providers=list(providers))
+    except Exception as err:  # noqa: BLE001 - onnxruntime raises its own types for a bad file
+        first = str(err).strip().splitlines()[0] if str(err).strip() else ""
+        raise ValueError(f"{path}: not an ONNX model onnxruntime can load ({type(err).__name__}: {first})") from None
 
 
 def yolox_grids(height: int, width: int, strides: Sequence[int] = YOLOX_STRIDES) -> tuple[torch.Tensor, torch.Tensor]:
@@ -185,23 +206,10 @@ class PersonDetector:
                 raise ValueError(f"{name}: expected a value in [0, 1], got {value!r}")
         if threads is not None and threads < 1:
             raise ValueError(f"threads: expected None or at least 1, got {threads!r}")
-        ort = import_onnxruntime()
+        import_onnxruntime()  # before the weights: a missing extra is named first
         self.path = resolve_detector_weights(model)
         self.score, self.iou, self.class_id = float(score), float(iou), int(class_id)
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = threads or torch.get_num_threads()
-        options.inter_op_num_threads = 1
-        options.log_severity_level = 3  # errors only: onnxruntime's warnings are not lit-boot's output
-        missing = [p for p in providers if p not in ort.get_available_providers()]
-        if missing or not providers:
-            raise ValueError(f"providers: expected some of {ort.get_available_providers()}, got {list(providers)}")
-        try:
-            self.session = ort.InferenceSession(str(self.path), sess_options=options, providers=list(providers))
-        except Exception as err:  # noqa: BLE001 - onnxruntime raises its own types for a bad file
-            first = str(err).strip().splitlines()[0] if str(err).strip() else ""
-            raise ValueError(
-                f"{self.path}: not an ONNX model onnxruntime can load ({type(err).__name__}: {first})"
-            ) from None
+        self.session = open_session(self.path, threads, providers)
         self.input_name, self.input_size = self._check_input(input_size)
         self.output_name, self.num_classes = self._check_output()
         log.debug("person detector %s: input %dx%d, %s classes", self.path.name, *self.input_size, self.num_classes)

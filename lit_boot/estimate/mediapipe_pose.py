@@ -234,6 +234,7 @@ def estimate_poses(
     detector: Any = None,
     crops: bool = False,
     people: str | int | None = None,
+    pose_model: str | os.PathLike | None = None,
 ) -> PoseEstimates:
     """MediaPipe Pose on every frame of ``video``: frames (T, 3, H, W) uint8 RGB, a Scene, or a
     video file / folder of frames (read with ``read_video(path, stride, max_frames, resize)``;
@@ -249,8 +250,11 @@ def estimate_poses(
     ("all", "largest" or a number N) every tracked person gets a pose instead, top-down
     (:mod:`.people_pose`: the detector's tracks, default ``"yolox_nano"``, MediaPipe on each
     one's crops; the main person is the most prominent, the others in ``others``). Returns
-    PoseEstimates with source ``mediapipe-<version>``; see the module docstring for conventions."""
-    mp = import_mediapipe()
+    PoseEstimates with source ``mediapipe-<version>``; see the module docstring for conventions.
+    With ``pose_model`` (the path of a SimCC pose model exported to ONNX, e.g. RTMPose's) that model
+    takes MediaPipe's place on each tracked person's crops (:mod:`.onnx_pose`: 2D keypoints only,
+    ``people`` "largest" where None; MediaPipe's own options do not apply)."""
+    mp = import_mediapipe() if pose_model is None else None
     frame_indices = None
     if isinstance(video, (str, os.PathLike)):
         from ..data.readers.video import read_video
@@ -262,6 +266,11 @@ def estimate_poses(
     if not (isinstance(video, torch.Tensor) and video.ndim == 4 and video.shape[1] == 3 and video.dtype == torch.uint8):
         got = getattr(video, "shape", type(video))
         raise ValueError(f"estimate_poses: expected frames (T, 3, H, W) uint8, a Scene or a path, got {got}")
+    if pose_model is not None:
+        from .onnx_pose import estimate_onnx_people
+
+        return estimate_onnx_people(video, pose_model, people=people or "largest", detector=detector,
+                                    frame_indices=frame_indices)  # fmt: skip
     if people is not None:
         return _people(mp, video, frame_indices, people, detector, model_complexity, min_detection_confidence,
                        max_jump, on_jump)  # fmt: skip
@@ -379,7 +388,8 @@ def estimate_pose_file(
         raise FileExistsError(f"--out {out}: exists (pass --overwrite to replace it)")
     if not video.exists():
         raise FileNotFoundError(f"{video}: no such video file or folder of frames")
-    import_mediapipe()  # fail before decoding the video
+    if options.get("pose_model") is None:
+        import_mediapipe()  # fail before decoding the video
     est = require_person(estimate_poses(video, **options), video)
     save_poses(est, out)
     return est, summary_line(est)
