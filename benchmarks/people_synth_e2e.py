@@ -21,7 +21,7 @@ in --seeds, as benchmarks/people_synth_tracking.py).
 Usage: OMP_NUM_THREADS=1 python benchmarks/people_synth_e2e.py [--people 2,3] [--seeds 30,31,32,33]
            [--frames 16] [--height 256] [--width 512] [--min-iou 0.3] [--min-pixels 50]
            [--detector ../shared/checkpoints/yolox_nano.onnx] [--det-score 0.25] [--det-iou 0.45]
-           [--on-jump keep] [--max-jump 0.5] [--why] [--true-boxes] [--true-poses]
+           [--on-jump keep] [--max-jump 0.5] [--why] [--true-boxes] [--true-poses] [--pose-model M.onnx]
            [--json out.json]
 
 With ``--true-boxes`` the detector is replaced by the true people's visible boxes (each person's
@@ -30,7 +30,9 @@ merges two people nor misses one), so that what is left is the pose estimator's 
 tracker's; everything else as above. With ``--true-poses`` MediaPipe is replaced by a perfect
 top-down pose estimator (:mod:`true_crop_poses`: each crop gives the true pose of the person most
 seen in its box; --on-jump and --max-jump do not apply), so that what is left is the detector's and
-the tracker's (with ``--true-boxes`` too, the tracker's alone).
+the tracker's (with ``--true-boxes`` too, the tracker's alone). With ``--pose-model`` a top-down
+SimCC model exported to ONNX (e.g. RTMPose's; ``estimate_poses(pose_model=...)``) takes MediaPipe's
+place, to measure one's own model against these figures.
 
 The first line names the installed versions of the packages the counts move with (another install
 gave other counts for the same code: BENCHMARKS.md, "A borrowed pose"). The last line sums the
@@ -283,6 +285,8 @@ def main() -> None:
     parser.add_argument("--why", action="store_true", help="print each switch of the poses and its kind")
     parser.add_argument("--true-boxes", action="store_true",
                         help="the true people's visible boxes in place of the detector (module docstring)")
+    parser.add_argument("--pose-model", default=None,
+                        help="a top-down SimCC pose model exported to ONNX (RTMPose's) in MediaPipe's place")
     parser.add_argument("--true-poses", action="store_true",
                         help="a perfect top-down pose estimator in place of MediaPipe (module docstring)")
     parser.add_argument("--json", default=None)
@@ -302,7 +306,8 @@ def main() -> None:
             truth = visible_boxes(scene, args.min_pixels)
             start = time.perf_counter()
             posed = returned_people(scene, TrueBoxes(truth) if args.true_boxes else detector, args.true_poses,
-                                    on_jump=args.on_jump, max_jump=args.max_jump)  # fmt: skip
+                                    on_jump=args.on_jump, max_jump=args.max_jump,
+                                    pose_model=args.pose_model)  # fmt: skip
             seconds = time.perf_counter() - start
             found = torch.stack([p.person_boxes for p in posed]) if posed else torch.zeros(0, args.frames, 5)
             rows, false = score(found, truth, args.min_iou)

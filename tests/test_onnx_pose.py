@@ -35,10 +35,10 @@ def _save(path: Path, nodes, inputs, outputs, initializers) -> Path:
     return path
 
 
-def brightest_model(path: Path, h: int = 32, w: int = 24, keypoints: int = K) -> Path:
+def brightest_model(path: Path, h: int = 32, w: int = 24, keypoints: int = K, y_first: bool = False) -> Path:
     """Input 'input' (1, 3, h, w); simcc_x (1, keypoints, w) = the softmax of each column's sum,
     simcc_y (1, keypoints, h) of each row's, one bin per px: every keypoint at the crop's brightest
-    column and row, confident where one stands out."""
+    column and row, confident where one stands out; ``y_first``: simcc_y is the first output."""
     from onnx import TensorProto, helper, numpy_helper
 
     nodes = [
@@ -53,9 +53,10 @@ def brightest_model(path: Path, h: int = 32, w: int = 24, keypoints: int = K) ->
     ]
     consts = {"axes_x": np.array([1, 2]), "axes_y": np.array([1, 3]), "axis1": np.array([1]),
               "shape_x": np.array([1, keypoints, w]), "shape_y": np.array([1, keypoints, h])}  # fmt: skip
+    outputs = [helper.make_tensor_value_info("simcc_x", TensorProto.FLOAT, [1, keypoints, w]),
+               helper.make_tensor_value_info("simcc_y", TensorProto.FLOAT, [1, keypoints, h])]
     return _save(path, nodes, [helper.make_tensor_value_info("input", TensorProto.FLOAT, [1, 3, h, w])],
-                 [helper.make_tensor_value_info("simcc_x", TensorProto.FLOAT, [1, keypoints, w]),
-                  helper.make_tensor_value_info("simcc_y", TensorProto.FLOAT, [1, keypoints, h])],
+                 outputs[::-1] if y_first else outputs,
                  [numpy_helper.from_array(v.astype(np.int64), k) for k, v in consts.items()])  # fmt: skip
 
 
@@ -87,8 +88,9 @@ def test_decode_simcc_takes_each_axis_best_bin_and_the_lower_score():
     assert conf.tolist() == pytest.approx([0.6, 1.0])  # the lower of the two; clamped to 1
 
 
-def test_a_dot_is_found_where_it_is_in_the_frame(tmp_path):
-    model = SimccPoseModel(brightest_model(tmp_path / "m.onnx"))
+@pytest.mark.parametrize("y_first", [False, True])
+def test_a_dot_is_found_where_it_is_in_the_frame(tmp_path, y_first):
+    model = SimccPoseModel(brightest_model(tmp_path / "m.onnx", y_first=y_first))  # outputs found by name
     assert model.input_size == (32, 24) and model.ratio == 1.0
     frames = dots(1, 90, 120, [(70, 40)])
     for box in ([50, 10, 90, 80], [60, 30, 75, 60], [40, 0, 110, 89]):  # the dot off-centre in each

@@ -8,8 +8,8 @@ pass the local path of an export (e.g. RTMPose-m's 256x192 COCO model from rtmli
 
 The model (:class:`SimccPoseModel`): one input (1, 3, h, w) float32 RGB, each channel as
 (value - mean) / std in 0-255 units (ImageNet's by default, as RTMPose is trained); two outputs,
-``simcc_x`` (1, K, w * r) and ``simcc_y`` (1, K, h * r) in that order: per keypoint a score for
-each 1/r px of the input's width and height. A keypoint lies at its best bin / r input px, its
+``simcc_x`` (1, K, w * r) and ``simcc_y`` (1, K, h * r) (by these names, else the first two in
+this order): per keypoint a score for each 1/r px of the input's width and height. A keypoint lies at its best bin / r input px, its
 confidence the lower of its two best scores (clamped to [0, 1]); K = 17, COCO's keypoints.
 The crop: the box's centre, its width and height x ``padding`` (1.25), the shorter one widened to
 the input's aspect ratio, resized bilinearly (``cv2.warpAffine``) onto the input. Pixels: frames and
@@ -95,8 +95,14 @@ class SimccPoseModel:
         return f"SimccPoseModel({str(self.path)!r}, input {self.input_size[0]}x{self.input_size[1]})"
 
     def _check(self) -> tuple[str, tuple[int, int], float]:
-        """The input's name, its (h, w) and the bins per px; ValueError naming the file otherwise."""
+        """The input's name, its (h, w) and the bins per px (and ``self.outputs``: simcc_x's and
+        simcc_y's names, by name where the model has both, else the first two); ValueError naming
+        the file otherwise."""
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        named = {o.name: o for o in outputs}
+        if "simcc_x" in named and "simcc_y" in named:
+            outputs = [named["simcc_x"], named["simcc_y"]]
+        self.outputs = [o.name for o in outputs[:2]]
         shape = list(inputs[0].shape) if len(inputs) == 1 else []
         if len(shape) != 4 or not all(isinstance(d, int) for d in shape[1:]) or shape[1] != 3:
             raise ValueError(f"{self.path}: expected one input of fixed shape [1, 3, h, w], got "
@@ -119,7 +125,7 @@ class SimccPoseModel:
         image = np.ascontiguousarray(frame.permute(1, 2, 0).numpy())
         crop = cv2.warpAffine(image, to_input, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
         blob = ((crop.astype(np.float32) - self.mean) / self.std).transpose(2, 0, 1)[None]
-        simcc_x, simcc_y = self.session.run(None, {self.input_name: np.ascontiguousarray(blob)})[:2]
+        simcc_x, simcc_y = self.session.run(self.outputs, {self.input_name: np.ascontiguousarray(blob)})
         points, confidence = decode_simcc(simcc_x[0], simcc_y[0], self.ratio)
         back = cv2.invertAffineTransform(to_input)
         frame_points = points @ back[:, :2].T + back[:, 2]
