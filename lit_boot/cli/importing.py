@@ -127,8 +127,7 @@ def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None =
     :class:`~lit_boot.estimate.NoPersonFound`)."""
     if pose_model is not None and not estimate:
         raise ValueError("--pose_model: needs --estimate true (it estimates the poses in MediaPipe's place)")
-    if pose_model is not None and not Path(pose_model).is_file():
-        raise ValueError(f"--pose_model {pose_model}: no such file (a SimCC pose model exported to ONNX)")
+    _check_pose_model(pose_model)
     if poses is not None and estimate:
         raise ValueError("--poses and --estimate: give one of them, not both")
     if detector is not None and not estimate:
@@ -239,8 +238,7 @@ def estimate_pose(argv: list[str]) -> int:
         raise CliError(f"VIDEO {args.video}: no such video file or folder of frames")
     if args.people is not None:
         _check_people(args.people)
-    if args.pose_model is not None and not Path(args.pose_model).is_file():
-        raise CliError(f"--pose_model {args.pose_model}: no such file (a SimCC pose model exported to ONNX)")
+    _check_pose_model(args.pose_model)
     from ..estimate import MediaPipeUnavailable, OnnxRuntimeUnavailable, estimate_pose_file
 
     options = {k: v for k, v in vars(args).items() if k not in ("video", "out", "overwrite")}
@@ -251,6 +249,12 @@ def estimate_pose(argv: list[str]) -> int:
         raise CliError(str(err)) from None
     print(f"{summary}; wrote {args.out}")
     return 0
+
+
+def _check_pose_model(pose_model: str | None) -> None:
+    """CliError unless --pose_model is unset or an existing file (checked before torch is imported)."""
+    if pose_model is not None and not Path(pose_model).is_file():
+        raise CliError(f"--pose_model {pose_model}: no such file (a SimCC pose model exported to ONNX)")
 
 
 def _check_people(people: str) -> None:
