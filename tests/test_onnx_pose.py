@@ -35,10 +35,12 @@ def _save(path: Path, nodes, inputs, outputs, initializers) -> Path:
     return path
 
 
-def brightest_model(path: Path, h: int = 32, w: int = 24, keypoints: int = K, y_first: bool = False) -> Path:
+def brightest_model(path: Path, h: int = 32, w: int = 24, keypoints: int = K, y_first: bool = False,
+                    input_shape: list | None = None) -> Path:  # fmt: skip
     """Input 'input' (1, 3, h, w); simcc_x (1, keypoints, w) = the softmax of each column's sum,
     simcc_y (1, keypoints, h) of each row's, one bin per px: every keypoint at the crop's brightest
-    column and row, confident where one stands out; ``y_first``: simcc_y is the first output."""
+    column and row, confident where one stands out; ``y_first``: simcc_y is the first output;
+    ``input_shape``: the input's declared shape instead of (1, 3, h, w)."""
     from onnx import TensorProto, helper, numpy_helper
 
     nodes = [
@@ -55,7 +57,8 @@ def brightest_model(path: Path, h: int = 32, w: int = 24, keypoints: int = K, y_
               "shape_x": np.array([1, keypoints, w]), "shape_y": np.array([1, keypoints, h])}  # fmt: skip
     outputs = [helper.make_tensor_value_info("simcc_x", TensorProto.FLOAT, [1, keypoints, w]),
                helper.make_tensor_value_info("simcc_y", TensorProto.FLOAT, [1, keypoints, h])]
-    return _save(path, nodes, [helper.make_tensor_value_info("input", TensorProto.FLOAT, [1, 3, h, w])],
+    declared = input_shape or [1, 3, h, w]
+    return _save(path, nodes, [helper.make_tensor_value_info("input", TensorProto.FLOAT, declared)],
                  outputs[::-1] if y_first else outputs,
                  [numpy_helper.from_array(v.astype(np.int64), k) for k, v in consts.items()])  # fmt: skip
 
@@ -138,6 +141,8 @@ def test_a_frame_without_a_box_has_no_pose_and_keep_frames_drops_frames(tmp_path
 def test_a_model_that_is_not_a_coco_simcc_model_is_refused_by_name(tmp_path):
     with pytest.raises(ValueError, match=r"five\.onnx: expected outputs simcc_x \[1, 17, 24 x r\]"):
         SimccPoseModel(brightest_model(tmp_path / "five.onnx", keypoints=5))
+    with pytest.raises(ValueError, match=r"free\.onnx: expected one input of fixed shape \[1, 3, h, w\]"):
+        SimccPoseModel(brightest_model(tmp_path / "free.onnx", input_shape=[1, 3, "height", "width"]))
     (tmp_path / "bad.onnx").write_bytes(b"not a model")
     with pytest.raises(ValueError, match=r"bad\.onnx: not an ONNX model onnxruntime can load"):
         SimccPoseModel(tmp_path / "bad.onnx")
