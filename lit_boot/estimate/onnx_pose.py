@@ -89,20 +89,18 @@ class SimccPoseModel:
         if self.mean.shape != (3,) or self.std.shape != (3,) or not (self.std > 0).all():
             raise ValueError(f"mean, std: expected three values each, std above 0, got {mean!r}, {std!r}")
         self.session = open_session(self.path, threads, providers)
-        self.input_name, self.input_size, self.ratio = self._check()
+        self.input_name, self.input_size, self.ratio, self.outputs = self._check()
 
     def __repr__(self) -> str:
         return f"SimccPoseModel({str(self.path)!r}, input {self.input_size[0]}x{self.input_size[1]})"
 
-    def _check(self) -> tuple[str, tuple[int, int], float]:
-        """The input's name, its (h, w) and the bins per px (and ``self.outputs``: simcc_x's and
-        simcc_y's names, by name where the model has both, else the first two); ValueError naming
-        the file otherwise."""
+    def _check(self) -> tuple[str, tuple[int, int], float, list[str]]:
+        """The input's name, its (h, w), the bins per px, and simcc_x's and simcc_y's names (by name
+        where the model has both, else the first two); ValueError naming the file otherwise."""
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         named = {o.name: o for o in outputs}
         if "simcc_x" in named and "simcc_y" in named:
             outputs = [named["simcc_x"], named["simcc_y"]]
-        self.outputs = [o.name for o in outputs[:2]]
         shape = list(inputs[0].shape) if len(inputs) == 1 else []
         if len(shape) != 4 or not all(isinstance(d, int) for d in shape[1:]) or shape[1] != 3:
             raise ValueError(f"{self.path}: expected one input of fixed shape [1, 3, h, w], got "
@@ -115,7 +113,7 @@ class SimccPoseModel:
             raise ValueError(f"{self.path}: expected outputs simcc_x [1, {K}, {w} x r] and simcc_y [1, {K}, {h} x r] "
                              "(a SimCC head for COCO's 17 keypoints), got "
                              + ", ".join(f"{o.name} {o.shape}" for o in outputs))  # fmt: skip
-        return inputs[0].name, (h, w), shapes[0][2] / w
+        return inputs[0].name, (h, w), shapes[0][2] / w, [o.name for o in outputs[:2]]
 
     def keypoints(self, frame: torch.Tensor, box: torch.Tensor) -> torch.Tensor:
         """(17, 3) x, y frame px and confidence of the person in ``box`` (x0, y0, x1, y1 px) of
@@ -168,6 +166,5 @@ def estimate_onnx_people(frames: torch.Tensor, model: SimccPoseModel | str | os.
 
     people, detector = parse_people(people), as_detector(detector)
     estimator = OnnxPoseCrops(model, frame_indices)
-    meta = {"pose_model": str(estimator.model.path), "detector": detector_name(detector),
-            "mode": "top-down: the pose model on each detection's crop"}  # fmt: skip
+    meta = {"detector": detector_name(detector), "mode": "top-down: the pose model on each detection's crop"}
     return estimate_people(estimator, frames, detector, people, meta)
