@@ -9,8 +9,9 @@ pass the local path of an export (e.g. RTMPose-m's 256x192 COCO model from rtmli
 The model (:class:`SimccPoseModel`): one input (1, 3, h, w) float32 RGB, each channel as
 (value - mean) / std in 0-255 units (ImageNet's by default, as RTMPose is trained); two outputs,
 ``simcc_x`` (1, K, w * r) and ``simcc_y`` (1, K, h * r) (by these names, else the first two in
-this order): per keypoint a score for each 1/r px of the input's width and height. A keypoint lies at its best bin / r input px, its
-confidence the lower of its two best scores (clamped to [0, 1]); K = 17, COCO's keypoints.
+this order): per keypoint a score for each 1/r px of the input's width and height. A keypoint lies
+at its best bin / r input px, its confidence the lower of its two best scores (clamped to [0, 1]);
+K = 17, COCO's keypoints.
 The crop: the box's centre, its width and height x ``padding`` (1.25), the shorter one widened to
 the input's aspect ratio, resized bilinearly (``cv2.warpAffine``) onto the input. Pixels: frames and
 input with pixel centres at integer coordinates; boxes x0, y0, x1, y1 px (:mod:`.detector`).
