@@ -53,20 +53,22 @@ def true_people(scene) -> list:
     return scene.gt.truths([p.track_id for p in scene.people()])
 
 
-def visible_keypoints(scene) -> torch.Tensor:
-    """(P, T) how many of each true person's COCO-17 keypoints are seen: inside the frame, with a
-    pixel of that person's own rendered mask within 1 px of the keypoint (the 3x3 around it)."""
+def seen_keypoints(scene) -> torch.Tensor:
+    """(P, T, 17) bool: each true person's COCO-17 keypoints seen: inside the frame, with a pixel of
+    that person's own rendered mask within 1 px of the keypoint (the 3x3 around it)."""
     truths = true_people(scene)
-    out = torch.zeros(len(truths), scene.num_frames, dtype=torch.long)
-    for p, truth in enumerate(truths):
-        near = F.max_pool2d(truth.person_mask.float()[:, None], 3, 1, 1)[:, 0] > 0  # (T, H, W)
-        T, H, W = near.shape
-        px = truth.keypoints2d.round().long()
-        inside = (px[..., 0] >= 0) & (px[..., 0] < W) & (px[..., 1] >= 0) & (px[..., 1] < H)
-        x, y = px[..., 0].clamp(0, W - 1), px[..., 1].clamp(0, H - 1)
-        seen = near[torch.arange(T)[:, None], y, x] & inside
-        out[p] = seen.sum(-1)
-    return out
+    masks = torch.stack([t.person_mask for t in truths])  # (P, T, H, W)
+    near = F.max_pool2d(masks.flatten(0, 1).float()[:, None], 3, 1, 1)[:, 0].view(masks.shape) > 0
+    P, T, H, W = masks.shape
+    px = torch.stack([t.keypoints2d for t in truths]).round().long()  # (P, T, 17, 2)
+    inside = (px[..., 0] >= 0) & (px[..., 0] < W) & (px[..., 1] >= 0) & (px[..., 1] < H)
+    x, y = px[..., 0].clamp(0, W - 1), px[..., 1].clamp(0, H - 1)
+    return near[torch.arange(P)[:, None, None], torch.arange(T)[None, :, None], y, x] & inside
+
+
+def visible_keypoints(scene) -> torch.Tensor:
+    """(P, T) how many of each true person's COCO-17 keypoints are seen (:func:`seen_keypoints`)."""
+    return seen_keypoints(scene).sum(-1)
 
 
 def detections_of(scene, jitter: float, miss: float, g: torch.Generator,

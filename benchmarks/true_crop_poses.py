@@ -6,7 +6,7 @@ leave of the identity switches when the pose estimator makes no mistake of its o
 scene's ground truth instead of MediaPipe: in each frame with a box, the true person with the most
 seen pixels (``PersonTruth.person_mask``) inside the box (x0, y0, x1, y1 px, pixel centres at integer
 coordinates) gives its true COCO-17 keypoints, confident (1) where seen (inside the frame, a pixel
-of that person's own mask within 1 px: ``people_synth_tracking.visible_keypoints``' rule) and 0
+of that person's own mask within 1 px: ``people_synth_tracking.seen_keypoints``) and 0
 elsewhere; nobody where that person has fewer than ``min_pixels`` seen pixels in the box or fewer
 than 4 joints seen. As a top-down estimator on a box around two people, it gives the one more seen
 (mostly the one in front). A track's poses are its boxes' (no video mode). The 3D (MediaPipe's
@@ -16,25 +16,14 @@ world landmarks) is a flat stand-in from the 2D keypoints: it is not scored.
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 
 from lit_boot.core.joints import COCO17, MEDIAPIPE33
 from lit_boot.estimate import MediaPipeCrops
 from lit_boot.estimate.mediapipe_pose import poses_from_landmarks
-from people_synth_tracking import true_people
+from people_synth_tracking import seen_keypoints, true_people
 
 #: Each COCO-17 joint's MediaPipe-33 landmark (the same names).
 COCO_IN_MEDIAPIPE = [MEDIAPIPE33.names.index(name) for name in COCO17.names]
-
-
-def seen_joints(masks: torch.Tensor, keypoints: torch.Tensor) -> torch.Tensor:
-    """(P, T, K) bool: each person's keypoints (P, T, K, 2) px seen, by its masks (P, T, H, W) bool."""
-    near = F.max_pool2d(masks.flatten(0, 1).float()[:, None], 3, 1, 1)[:, 0].view(masks.shape) > 0
-    P, T, H, W = masks.shape
-    px = keypoints.round().long()
-    inside = (px[..., 0] >= 0) & (px[..., 0] < W) & (px[..., 1] >= 0) & (px[..., 1] < H)
-    x, y = px[..., 0].clamp(0, W - 1), px[..., 1].clamp(0, H - 1)
-    return near[torch.arange(P)[:, None, None], torch.arange(T)[None, :, None], y, x] & inside
 
 
 class TrueCropPoses(MediaPipeCrops):
@@ -44,7 +33,7 @@ class TrueCropPoses(MediaPipeCrops):
         truths = true_people(scene)
         self.masks = torch.stack([t.person_mask for t in truths])  # (P, T, H, W)
         self.keypoints = torch.stack([t.keypoints2d for t in truths])  # (P, T, 17, 2)
-        self.seen = seen_joints(self.masks, self.keypoints)
+        self.seen = seen_keypoints(scene)  # (P, T, 17)
         self.min_pixels = min_pixels
         size = tuple(scene.frames.shape[2:])
         super().__init__(None, lambda *raw: poses_from_landmarks(*raw, size, source="true-crop-poses"))
