@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 
 import pytest
 import torch
@@ -98,3 +99,22 @@ def test_import_errors_are_one_line(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert words in err and len(err.splitlines()) == 1 and err.startswith("lit-boot import: error: "), err
     assert not (tmp_path / "s").exists()
+
+
+def test_options_that_need_estimate_are_refused_without_it(tmp_path, capsys):
+    from lit_boot.cli.importing import with_poses
+
+    video = tmp_path / "v.mp4"
+    video.write_bytes(b"")  # never read: the options are refused first
+    cases = [("--detector", "yolox_nano", "--detector: needs --estimate true"),
+             ("--pose_model", str(tmp_path / "m.onnx"), "--pose_model: needs --estimate true"),
+             ("--people", "all", "--people: needs --estimate true or --poses")]  # fmt: skip
+    for flag, value, words in cases:
+        assert main(["import", "video", str(video), "--out", str(tmp_path / "s"), flag, value]) == 2
+        err = capsys.readouterr().err.strip()
+        assert words in err and len(err.splitlines()) == 1, err
+        # the other readers' path (a scene read first): the same words
+        with pytest.raises(ValueError, match=re.escape(words)):
+            with_poses(None, None, False, **{flag[2:]: value})
+    assert not (tmp_path / "s").exists()
+    assert with_poses("scene", None, False) == "scene"  # nothing asked of --estimate: the scene as it was

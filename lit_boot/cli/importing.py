@@ -125,15 +125,11 @@ def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None =
     person ``detector``'s boxes when given, for every tracked person with ``people``; with
     ``pose_model``, that ONNX model in MediaPipe's place; a scene in which nobody is found raises
     :class:`~lit_boot.estimate.NoPersonFound`)."""
-    if pose_model is not None and not estimate:
-        raise ValueError("--pose_model: needs --estimate true (it estimates the poses in MediaPipe's place)")
+    if message := estimate_options_error(poses, estimate, detector, people, pose_model):
+        raise ValueError(message)
     _check_pose_model(pose_model)
     if poses is not None and estimate:
         raise ValueError("--poses and --estimate: give one of them, not both")
-    if detector is not None and not estimate:
-        raise ValueError("--detector: needs --estimate true (it adds the person's boxes to the estimated poses)")
-    if people is not None and not estimate and poses is None:
-        raise ValueError("--people: needs --estimate true or --poses (every person's pose comes from one of them)")
     if poses is not None:
         return read_pose_file(poses, people).apply_to(scene)
     if estimate:
@@ -143,6 +139,20 @@ def with_poses(scene, poses: Path | None, estimate: bool, detector: str | None =
             est = estimate_poses(scene.frames, detector=detector, people=people, pose_model=pose_model)
         return require_person(est, f"scene {scene.name!r}").apply_to(scene)  # nobody: no pose to bootstrap
     return scene
+
+
+def estimate_options_error(poses: Path | None, estimate: bool, detector: str | None, people: str | None,
+                           pose_model: str | None) -> str | None:  # fmt: skip
+    """What is wrong with options that need ``--estimate true`` given without it, else None."""
+    if estimate:
+        return None
+    if pose_model is not None:
+        return "--pose_model: needs --estimate true (it estimates the poses in MediaPipe's place)"
+    if detector is not None:
+        return "--detector: needs --estimate true (it adds the person's boxes to the estimated poses)"
+    if people is not None and poses is None:
+        return "--people: needs --estimate true or --poses (every person's pose comes from one of them)"
+    return None
 
 
 def read_pose_file(poses: Path, people: str | None):
@@ -175,12 +185,8 @@ def import_scene(argv: list[str]) -> int:
     out, overwrite = options.pop("out"), options.pop("overwrite")
     refuse_to_overwrite(out, overwrite)
     if args.kind == "video" and not estimate:  # read_video selects and checks the pose rows itself
-        if detector is not None:
-            raise CliError("--detector: needs --estimate true (it adds the person's boxes to the estimated poses)")
-        if pose_model is not None:
-            raise CliError("--pose_model: needs --estimate true (it estimates the poses in MediaPipe's place)")
-        if people is not None and poses is None:
-            raise CliError("--people: needs --estimate true or --poses (every person's pose comes from one of them)")
+        if message := estimate_options_error(poses, estimate, detector, people, pose_model):
+            raise CliError(message)
         if people is not None:  # every person of the file; else read_video reads it (its errors name the file)
             poses = read_pose_file(poses, people)
         scene = _reader("video")(**options, poses=poses)
