@@ -71,8 +71,10 @@ class SimccPoseModel:
     Args:
         model: the ONNX file's path.
         padding: the crop's sides in box sides.
-        mean, std: the input's normalisation per RGB channel, 0-255 units.
-        threads, providers: onnxruntime's (as :class:`~.detector.PersonDetector`'s).
+        mean: the input's mean per RGB channel, 0-255 units, subtracted.
+        std: the input's standard deviation per RGB channel, 0-255 units, divided by.
+        threads: onnxruntime's intra-op threads (as :class:`~.detector.PersonDetector`'s).
+        providers: onnxruntime's execution providers (as :class:`~.detector.PersonDetector`'s).
 
     A missing or unreadable file, or one whose input or outputs are not a SimCC model's for COCO's
     17 keypoints, raises an error naming the file and what was expected."""
