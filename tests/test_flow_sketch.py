@@ -325,3 +325,20 @@ def test_gt_sketch_beats_raft_on_synthetic_scene(shared) -> None:
     magnitude = float(gt.flow.norm(dim=1)[pixels].mean())  # measured 4.50 px
     assert sketch_epe < 0.4 * magnitude and sketch_epe < 2.0
     assert sketch_epe < raft_epe
+
+
+def test_a_segment_is_clipped_to_the_box_from_its_last_entry_to_its_first_exit() -> None:
+    """Liang-Barsky by hand, box [0, 20]^2: (-10, -30) -> (10, 10) is inside in x for s in
+    [0.5, 1.5] and in y for s in [0.75, 1.25], so it enters at s = 0.75 (the point (5, 0)) and
+    leaves at the bone's end; (-20, 10) -> (10, -20) is inside in x for s >= 2/3 but in y only
+    for s <= 1/3: it misses the box (s0 > s1); a segment inside stays whole; a flat segment
+    (dy = 0) outside in y is empty."""
+    from lit_boot.flow.sketch import _clip_segment
+
+    a = torch.tensor([[-10.0, -30.0], [-20.0, 10.0], [2.0, 3.0], [-5.0, 25.0]])
+    b = torch.tensor([[10.0, 10.0], [10.0, -20.0], [18.0, 19.0], [30.0, 25.0]])
+    s0, s1 = _clip_segment(a, b, torch.tensor([0.0, 0.0]), torch.tensor([20.0, 20.0]))
+    torch.testing.assert_close(s0[:3], torch.tensor([0.75, 2 / 3, 0.0]))
+    torch.testing.assert_close(s1[:3], torch.tensor([1.0, 1 / 3, 1.0]))
+    assert s0[3] > s1[3]  # flat and outside: empty
+    torch.testing.assert_close(a[0] + s0[0] * (b[0] - a[0]), torch.tensor([5.0, 0.0]))  # on the box's top edge

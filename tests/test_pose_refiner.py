@@ -228,3 +228,33 @@ def test_torch_threads_are_set_for_the_fit_and_restored_even_after_errors(jitter
     with pytest.raises(RuntimeError, match="boom"):
         make_trainer(5, early_stop=False).fit(model, datamodule=PoseData(jittered, "gt"))
     assert seen[-1] == 1 and torch.get_num_threads() == before
+
+
+@pytest.mark.parametrize("camera", ["weak_perspective", "pinhole"])
+def test_the_camera_smoothness_term_is_the_hand_derived_value_and_pulls_a_jittered_camera_back(camera):
+    """One frame's camera variables jump by (1.5, 0.3, -0.2) (weak perspective: s, tx, ty;
+    pinhole: the translation in metres) and back: each of the 2 pairs touching it costs
+    SmoothL1 (beta 1) 1.0 + 0.045 + 0.02 = 1.065, so at the paper's lambda 0.1, averaged over the
+    3 pairs, the cam term is 0.1 * 2.13 / 3; its gradient at the jittered frame is
+    0.1 / 3 * 2 * (1, 0.3, -0.2) (towards its neighbours) and the opposite half at each of them."""
+    scene = still_scene(camera)
+    params = scene.cameras.params.clone()
+    jump = torch.tensor([1.5, 0.3, -0.2])
+    if camera == "weak_perspective":
+        params[2] += jump  # (s, tx, ty): the variables themselves
+    else:
+        params[2, 4:7] += jump * 1000.0  # the translation in mm; the variables are metres
+    scene = dataclasses.replace(scene, cameras=dataclasses.replace(scene.cameras, params=params))
+    model = PoseRefiner(save=False)  # the paper's lambdas
+    model.prepare(scene, torch.zeros(3, 2, 64, 96))
+    _, terms = model.total_loss(with_terms=True)
+    assert PoseLossWeights().cam == 0.1 and "cam" in terms  # the term is on
+    assert terms["cam"].item() == pytest.approx(0.1 * 2 * 1.065 / 3, rel=1e-5)
+    alone = PoseRefiner(loss_weights=PoseLossWeights(opt=0, joints3d=0, keypoints2d=0, pos=0, bone=0), save=False)
+    alone.prepare(scene, None)
+    loss, terms = alone.total_loss(with_terms=True)
+    assert set(terms) == {"cam"}
+    loss.backward()
+    pull = 0.1 / 3 * torch.tensor([1.0, 0.3, -0.2])  # SmoothL1' = clamp(r, -1, 1) per pair
+    expected = torch.stack([torch.zeros(3), -pull, 2 * pull, -pull])[:, None]  # (T, P, 3)
+    torch.testing.assert_close(alone.camera_vars.grad, expected, atol=1e-6, rtol=1e-5)

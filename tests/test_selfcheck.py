@@ -335,3 +335,35 @@ def test_the_default_preset_frees_the_zone_beside_the_sketch_and_checks_each_pix
         assert config.flow_kwargs()["sketch_gap"] == 2.0
     assert BootstrapConfig(mode="2d").flow_kwargs()["plateau_delta"] == 0.02
     assert "sketch_gap" not in BootstrapConfig(preset="paper").flow_kwargs()  # the authors hold every pixel
+
+
+def test_a_tile_gain_below_the_margin_keeps_the_initial_flow_and_one_above_it_takes_the_tuned():
+    """choose_regions with margin 0.02 on noise-free tiles (a clear gain): the tuned flow wins a
+    tile only where its error is below 0.98 x the initial's, so 1% better keeps the initial
+    flow, 3% better takes the tuned, and 1% worse keeps the initial."""
+    labels = torch.arange(3).repeat_interleave(8).expand(8, 24)  # three 8x8 tiles side by side
+    valid = torch.ones(8, 24, dtype=torch.bool)
+    initial = torch.full((8, 24), 20.0)
+    tuned = torch.tensor([0.99, 0.97, 1.01]).repeat_interleave(8).expand(8, 24) * 20.0
+    won, mean_i, mean_t, pixels = choose_regions(initial, tuned, valid, labels, 3, margin=0.02, z=1.0)
+    assert pixels.tolist() == [64, 64, 64]
+    assert torch.allclose(mean_t / mean_i, torch.tensor([0.99, 0.97, 1.01]))
+    assert won.tolist() == [False, True, False]
+    won, *_ = choose_regions(initial, tuned, valid, labels, 3, margin=0.0, z=1.0)
+    assert won.tolist() == [True, True, False]  # no margin: any clear gain
+
+
+def test_a_person_pixel_gain_below_the_margin_keeps_the_initial_flow_and_one_above_it_takes_the_tuned():
+    """choose_pixels with margin 0.02 on three noise-free bands of constant error: inside each
+    band (beyond the 3x3 box) the tuned flow wins only where its error is below 0.98 x the
+    initial's: 1% better and 1% worse keep the initial flow, 3% better takes the tuned."""
+    initial = torch.full((8, 24), 10.0)
+    tuned = torch.tensor([0.99, 0.97, 1.01]).repeat_interleave(8).expand(8, 24) * 10.0
+    every = torch.ones(8, 24, dtype=torch.bool)
+    for own in (False, True):
+        won = choose_pixels(initial, tuned, every, every, window=3, margin=0.02, own=own)
+        assert not won[:, 0:7].any()  # 1% better: within the margin
+        assert won[:, 9:15].all()  # 3% better: beyond it
+        assert not won[:, 17:24].any()  # 1% worse
+    won = choose_pixels(initial, tuned, every, every, window=3, margin=0.0)
+    assert won[:, 0:15].all() and not won[:, 17:24].any()  # no margin: any gain
