@@ -151,15 +151,17 @@ def print_bars(rows: list[dict], preset: str) -> None:
     all-pixel EPE got better (the bars of issues 13 and 24)."""
     if not rows:
         return
-    rel = {k: [100 * (r["stages"]["flow_2"][k] / r["stages"]["initial"][k] - 1) for r in rows]
-           for k in ("epe", "epe_person", "epe_background")}  # fmt: skip
+    flow_keys = [k for k in ("epe_all_pixels", "epe", "epe_unmatched", "epe_person", "epe_background")
+                 if k in rows[0]["stages"]["initial"]]  # fmt: skip
+    rel = {k: [100 * (r["stages"]["flow_2"][k] / r["stages"]["initial"][k] - 1) for r in rows] for k in flow_keys}
     pose = next((k for k in ("mpjpe_mm", "kp2d_px") if k in rows[0]["stages"]["initial"]), None)
     if pose is not None:
         rel[pose] = [100 * (r["stages"]["pose_1"][pose] / r["stages"]["initial"][pose] - 1) for r in rows]
     parts = [f"{k} {sum(v) / len(v):+.1f}% (worst {max(v):+.1f}%)" for k, v in rel.items()]
-    better = sum(v < 0 for v in rel["epe"])
-    print(f"\n{preset}: mean over {len(rows)} scenes of the change RAFT -> flow_2: {', '.join(parts)}; "
-          f"all-pixel EPE better on {better} of {len(rows)} scenes")
+    better = "; ".join(f"{k} better on {sum(v < 0 for v in rel[k])} of {len(rows)} scenes"
+                       for k in ("epe_all_pixels", "epe") if k in rel)  # fmt: skip
+    print(f"\n{preset}: mean over {len(rows)} scenes of the change RAFT -> flow_2 (epe_all_pixels: every valid "
+          f"pixel, Sintel's all; epe: matched; epe_unmatched: occluded): {', '.join(parts)}; {better}")
 
 
 if __name__ == "__main__":

@@ -1,10 +1,12 @@
 """The method on real data, with MediaPipe Pose as the only pose source (the mediapipe extra).
 
-- Sintel samples where MediaPipe finds the person (alley_1, market_5, temple_3; final pass):
-  2D-only bootstrapping (KeypointRefiner, 50 flow epochs by default); EPE of the pairs with GT,
-  before (pretrained RAFT) and after. "all" = every valid pixel, occluded ones included (Sintel's
-  convention); "noc" = valid and not occluded (lit-boot's run metrics). keypoints_gt_pair.png in
-  each run folder shows MediaPipe's keypoints on the GT pair's first frame.
+- The Sintel windows (final pass; the held-out ones with --heldout-root), MediaPipe's keypoints
+  and 3D joints and the YOLOX boxes: each window in each ``--mode`` (2D and 3D by default; a run
+  does what the scene's evidence allows: lit_boot.bootstrap.plan); EPE of the pairs with GT,
+  before (pretrained RAFT) and after, as Sintel reports it: "all" = every valid pixel, "noc"
+  (matched) = valid and not occluded (lit-boot's ``epe``), "occ" (unmatched) = valid and occluded
+  in frame t+1. Run folders: ``--out``/<mode>/<window>; keypoints_gt_pair.png in each shows
+  MediaPipe's keypoints on the GT pair's first frame.
 - The basketball clip (no GT): the whole 3D method on its first frames; the football clip (no GT,
   10 frames): the 2D-only method. For both, the flow-pose agreement (L_opt residual, px) before and
   after, the overlay video in the run folder, and the image evidence (no GT needed): the census
@@ -14,7 +16,7 @@
 
 Usage:
   python benchmarks/real_data.py [--parts sintel,basketball,football] [--scenes alley_1,market_5,...]
-      [--sintel-size 218,512] [--flow '{"sketch": {"max_disagreement_px": 3}}']
+      [--mode 2d,3d] [--sintel-size 218,512] [--flow '{"sketch": {"max_disagreement_px": 3}}']
       [--epochs N (default: the mode's)] [--pose-steps 1500] [--basketball-frames 16]
       [--basketball-resize 270] [--weights ../shared/checkpoints/raft-small.pth]
       [--self-check off|photometric] [--gate] [--config JSON] [--detector PATH|none] [--estimate JSON]
@@ -74,11 +76,13 @@ def window_with_boxes(window: str, size, detector: str, heldout_root: Path = HEL
 
 
 def gt_pair_epe(flows: torch.Tensor, scene) -> dict[str, float]:
-    """EPE over the pairs with GT: all valid pixels, and valid non-occluded ones."""
+    """EPE over the pairs with GT, as Sintel reports it: "all" valid pixels, the "noc" (matched:
+    valid, not occluded) and the "occ" (unmatched: valid, occluded in frame t+1)."""
     gt = scene.gt
     valid = gt.flow_valid
-    noc = valid & ~gt.flow_occluded if gt.flow_occluded is not None else valid
-    return {"all": float(flow_errors(flows, gt.flow, valid)["epe"]), "noc": float(flow_errors(flows, gt.flow, noc)["epe"])}
+    occluded = gt.flow_occluded if gt.flow_occluded is not None else torch.zeros_like(valid)
+    masks = {"all": valid, "noc": valid & ~occluded, "occ": valid & occluded}
+    return {k: float(flow_errors(flows, gt.flow, m)["epe"]) for k, m in masks.items() if m.any()}
 
 
 def run(scene, out: Path, mode: str, args, video: bool) -> tuple[dict, object]:
@@ -114,6 +118,36 @@ def evidence(result) -> dict:
     return out
 
 
+def _change(r: dict, k: str) -> str:
+    before, after = r["before"].get(k), r["after"].get(k)
+    return "" if before is None else f"{before:.3f} -> {after:.3f} ({100 * (after / before - 1):+.1f}%)"
+
+
+def print_table(rows: list[dict]) -> None:
+    """One markdown table per mode (EPE all / matched / unmatched, Sintel's, before -> after), the
+    mean change of each over the windows with GT; then the no-GT clips."""
+    for mode in dict.fromkeys(r.get("mode", "") for r in rows):
+        mine = [r for r in rows if r.get("mode", "") == mode]
+        print(f"\n{mode or 'clips'}:\n\n| window | ran | frames (pose, boxes) | EPE all | EPE matched | EPE unmatched "
+              "| census person RAFT -> final | painted, kept tuned per flow stage | x RAFT |")
+        print("| --- " * 9 + "|")
+        for r in mine:
+            ev = r["evidence"]
+            census = f"{ev['raft']['person']:.2f} -> {ev['final']['person']:.2f}"
+            decided = "; ".join(f"{d['painted_fraction'] or 0:.3f}, {d['kept_tuned_fraction']:.2f}" for d in ev["decisions"])
+            epe = [_change(r, k) if "before" in r else "no GT" for k in ("all", "noc", "occ")]
+            ran = f"{r.get('ran', '')} {'+'.join(r.get('stages', []))}"
+            print(f"| {r['scene']} | {ran} | {r['frames']} ({r['found']}, {r.get('boxes', '')}) | {' | '.join(epe)} "
+                  f"| {census} | {decided} | {r['speed']['ratio_to_raft']:.1f} |")  # fmt: skip
+        scored = [r for r in mine if "before" in r]
+        if scored:
+            means = {k: sum(100 * (r["after"][k] / r["before"][k] - 1) for r in scored) / len(scored)
+                     for k in ("all", "noc", "occ") if all(k in r["before"] for r in scored)}  # fmt: skip
+            worst = max(100 * (r["after"]["all"] / r["before"]["all"] - 1) for r in scored)
+            print(f"\nmean change over {len(scored)} windows: " + ", ".join(f"{k} {v:+.1f}%" for k, v in means.items())
+                  + f"; worst window (all) {worst:+.1f}%")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--parts", default="sintel,basketball,football")
@@ -129,6 +163,7 @@ def main() -> None:
     p.add_argument("--config", default="{}", help="more BootstrapConfig options, JSON (e.g. '{\"zoom\": {\"method\": \"off\"}}')")
     p.add_argument("--estimate", default="{}",
                    help='more estimate_poses options for the Sintel windows, JSON (e.g. \'{"crops": true}\')')
+    p.add_argument("--mode", default="2d,3d", help="the Sintel windows' modes, comma-separated (each window in each)")
     p.add_argument("--sintel-size", default="218,512", help="H,W (the samples are 436,1024) or full")
     p.add_argument("--epochs", type=int, default=None, help="flow epochs per stage (default: 50 in 2D, 8 in 3D)")
     p.add_argument("--pose-steps", type=int, default=1500)
@@ -150,17 +185,20 @@ def main() -> None:
             poses = estimate_poses(read_sintel(root, name, first=first, last=last, pass_name=pass_name),
                                    detector=detector, **json.loads(args.estimate))  # fmt: skip
             scene = poses.apply_to(read_sintel(root, name, first=first, last=last, size=size, pass_name=pass_name))
-            speed, result = run(scene, Path(args.out) / window, "2d", args, video=False)
-            # the detections on the GT pair's first frame, to judge them by eye (frame | GT flow | keypoints)
-            first_gt = scene.metadata["frames"].index(scene.metadata["gt_pairs"][0][0])
-            write_png(Path(args.out) / window / "keypoints_gt_pair.png", scene_preview(scene, first_gt))
-            boxes = 0 if poses.person_boxes is None else int((poses.person_boxes[:, 4] > 0).sum())
-            row = {"scene": window, "found": int(poses.found().sum()), "boxes": boxes, "frames": scene.num_frames,
-                   "before": gt_pair_epe(result.initial_flows, scene), "after": gt_pair_epe(result.flows, scene),
-                   "agreement": [result.history[0]["agreement_px"], result.history[-1]["agreement_px"]], "speed": speed,
-                   "evidence": evidence(result)}  # fmt: skip
-            rows.append(row)
-            print(json.dumps(row), flush=True)
+            for mode in args.mode.split(","):
+                speed, result = run(scene, Path(args.out) / mode / window, mode, args, video=False)
+                # the detections on the GT pair's first frame, to judge them by eye (frame | GT flow | keypoints)
+                first_gt = scene.metadata["frames"].index(scene.metadata["gt_pairs"][0][0])
+                write_png(Path(args.out) / mode / window / "keypoints_gt_pair.png", scene_preview(scene, first_gt))
+                boxes = 0 if poses.person_boxes is None else int((poses.person_boxes[:, 4] > 0).sum())
+                plan = json.loads((result.run_dir / "summary.json").read_text())["plan"]
+                row = {"scene": window, "mode": mode, "ran": plan["mode"], "stages": plan["stages"],
+                       "found": int(poses.found().sum()), "boxes": boxes, "frames": scene.num_frames,
+                       "before": gt_pair_epe(result.initial_flows, scene), "after": gt_pair_epe(result.flows, scene),
+                       "agreement": [result.history[0]["agreement_px"], result.history[-1]["agreement_px"]],
+                       "speed": speed, "evidence": evidence(result)}  # fmt: skip
+                rows.append(row)
+                print(json.dumps(row), flush=True)
     clips = {"basketball": ("basketball_1080p_89f.mp4", "3d", args.basketball_frames, args.basketball_resize),
              "football": ("football_720p_10f", "2d", None, args.basketball_resize)}  # fmt: skip
     for clip, (file, mode, frames, resize) in clips.items():
@@ -175,16 +213,7 @@ def main() -> None:
                "overlay": str(result.run_dir / "overlay.mp4"), "speed": speed, "evidence": evidence(result)}  # fmt: skip
         rows.append(row)
         print(json.dumps(row), flush=True)
-    print("\n| scene | frames (person found) | EPE all before -> after | EPE noc before -> after | agreement px "
-          "| census person RAFT -> final | census all RAFT -> final | painted, kept tuned per flow stage | x RAFT |")
-    print("| --- " * 9 + "|")
-    for r in rows:
-        epe = [f"{r['before'][k]:.3f} -> {r['after'][k]:.3f}" if "before" in r else "no GT" for k in ("all", "noc")]
-        a, ev = r["agreement"], r["evidence"]
-        census = [f"{ev['raft'][k]:.2f} -> {ev['final'][k]:.2f}" for k in ("person", "all")]
-        decided = "; ".join(f"{d['painted_fraction'] or 0:.3f}, {d['kept_tuned_fraction']:.2f}" for d in ev["decisions"])
-        print(f"| {r['scene']} | {r['frames']} ({r['found']}) | {epe[0]} | {epe[1]} | {a[0]:.2f} -> {a[1]:.2f} "
-              f"| {census[0]} | {census[1]} | {decided} | {r['speed']['ratio_to_raft']:.1f} |")  # fmt: skip
+    print_table(rows)
     if args.json:
         Path(args.json).write_text(json.dumps({"settings": vars(args), "rows": rows}, indent=1))
 

@@ -109,7 +109,7 @@ def test_validation_reports_the_orchestrators_numbers_under_its_names(trainer):
     with torch.no_grad():
         flows = torch.cat([predict_flow(model.raft, scene.frames[i], scene.frames[i + 1], 3) for i in range(2)])
     expected = scene_flow_metrics(scene.gt, flows)
-    assert set(expected) == {"epe", "epe_person", "epe_background", "epe_joints"}
+    assert set(expected) == {"epe", "epe_unmatched", "epe_all_pixels", "epe_person", "epe_background", "epe_joints"}
     for name, value in expected.items():
         assert logged[f"val/{name}"] == pytest.approx(value, rel=1e-4), name
 

@@ -25,7 +25,7 @@ from lit_boot.metrics import (
 )
 from lit_boot.synth import make_scene
 
-FLOW_NAMES = {"epe", "epe_person", "epe_background", "epe_joints"}
+FLOW_NAMES = {"epe", "epe_unmatched", "epe_all_pixels", "epe_person", "epe_background", "epe_joints"}
 POSE_NAMES = {"3d": {"mpjpe_mm", "pa_mpjpe_mm", "accel_mm_per_frame2", "proj2d_px"}, "2d": {"kp2d_px"}}
 
 
@@ -61,7 +61,8 @@ def _pooled(scenes, mode: str) -> dict[str, float]:
     for scene, flows in scenes:
         gt = scene.gt
         flow.update(flows.float(), gt.flow.float() if gt.flow is not None else None, gt.flow_mask(),
-                    gt.person_mask[:-1], gt.joints2d[:-1].float(), gt.joints2d[1:].float())  # fmt: skip
+                    gt.person_mask[:-1], gt.joints2d[:-1].float(), gt.joints2d[1:].float(),
+                    gt.unmatched_mask())  # fmt: skip
     out = {name: float(value) for name, value in flow.compute().items()}
     z0 = lambda points: F.pad(points.float(), (0, 1))  # noqa: E731  2D points as 3D ones, z = 0
     if mode == "2d":

@@ -29,6 +29,14 @@ def test_flow_metrics_split_person_background_and_leave_out_occluded_pixels():
     assert out["epe_background"] == pytest.approx(0.0)
     assert out["epe"] == pytest.approx(4 / 12)  # 4 of the 12 scored pixels are 1 px off
     assert out["epe_joints"] == pytest.approx(1.0)  # flow (1, 0) at (1, 1) vs a (2, 0) step; one joint inside
+    assert out["epe_unmatched"] == pytest.approx(1.0)  # the hidden row: its 4 pixels 1 px off (Sintel's unmatched)
+    assert out["epe_all_pixels"] == pytest.approx(8 / 16)  # every pixel (Sintel's all): 8 of 16 are 1 px off
+
+
+def test_without_occlusions_in_the_gt_only_the_matched_epe_is_reported():
+    truth = GroundTruth(flow=torch.zeros(1, 2, 3, 3))
+    out = scene_flow_metrics(truth, torch.ones(1, 2, 3, 3))
+    assert out == {"epe": pytest.approx(2**0.5)}  # no unmatched pixels to tell apart: no second name for it
 
 
 def test_flow_metrics_pool_batches_and_prefix_their_names():

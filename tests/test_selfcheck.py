@@ -14,7 +14,7 @@ import lit_boot
 from lit_boot.bootstrap import Bootstrap, BootstrapConfig, bootstrap
 from lit_boot.bootstrap.config import WHOLE_FRAME_MAX_CHANGE_PX, SelfCheckConfig
 from lit_boot.bootstrap import runner as runner_module
-from lit_boot.bootstrap.decisions import DECISION_COLOURS, decision_image, load_decisions
+from lit_boot.bootstrap.decisions import DECISION_COLOURS, decision_image, load_decisions, load_mask
 from lit_boot.bootstrap.selfcheck import (blend_weights, changed_box, check_stage, choose_pixels, choose_regions,
                                          region_labels, region_names, self_check)
 from lit_boot.flow import person_region
@@ -229,6 +229,10 @@ def test_a_run_with_the_self_check_records_it_does_no_harm_and_resumes(shared, s
     summary = json.loads((tmp_path / "run/summary.json").read_text())
     assert summary["stages"][-1]["info"]["self_check"]["kept_tuned_fraction"] == check["kept_tuned_fraction"]
     assert "epe" in check["tuned_metrics"]
+    unjudged = load_mask(tmp_path / "run/stages/initial/unjudged.npz")  # RAFT's forward-backward check, saved once
+    assert unjudged.shape == (2, 64, 96) and check["unjudged_fraction"] == pytest.approx(float(unjudged.float().mean()))
+    kept = load_decisions(tmp_path / "run/stages/flow_1/decisions.npz")["kept"]
+    assert not (kept[unjudged] > 0).any()  # the tuned flow is kept nowhere the frames cannot judge
     # the final flows are no worse than the initial flows in any region (up to the blend at borders)
     person = torch.zeros(2, 64, 96, dtype=torch.bool)
     labels = region_labels(person, TILE)
@@ -367,3 +371,40 @@ def test_a_person_pixel_gain_below_the_margin_keeps_the_initial_flow_and_one_abo
         assert not won[:, 17:24].any()  # 1% worse
     won = choose_pixels(initial, tuned, every, every, window=3, margin=0.0)
     assert won[:, 0:15].all() and not won[:, 17:24].any()  # no margin: any gain
+
+
+def test_a_pixel_the_frames_cannot_judge_keeps_the_initial_flow(scene):
+    """The tuned flow is the GT and the initial 1.5 px off: the rules take the tuned flow, except
+    where the frames cannot judge (an ``unjudged`` pixel, or one whose target leaves the frame)."""
+    gt = scene.gt.flow.float()
+    initial, person = gt + 1.5, scene.gt.person_mask[:-1]
+    config = SelfCheckConfig(tile=TILE, window=5, own=False)
+    flows, record, _ = self_check(scene.frames, initial, gt, person, config=config)
+    assert record["unjudged_fraction"] is None
+    refused_at_border = sum(p["unjudged"] for p in record["per_pair"])  # targets 1.5 px beyond the frame's edge
+    chose = (flows == gt).all(1)
+    assert chose[:, 16:48, 16:80].float().mean() > 0.9  # the frames prefer the exact flow inside
+    unjudged = torch.zeros_like(person)
+    unjudged[:, 20:30, 30:60] = True  # say the forward-backward check flagged these as occluded
+    flows, record, _ = self_check(scene.frames, initial, gt, person, config=config, unjudged=unjudged)
+    assert torch.equal(flows[:, :, 20:30, 30:60], initial[:, :, 20:30, 30:60])
+    refused = sum(p["unjudged"] for p in record["per_pair"])
+    assert refused == refused_at_border + int((chose & unjudged).sum())
+    assert record["unjudged_fraction"] == pytest.approx(300 / (64 * 96))
+    leaving = gt.clone()
+    leaving[:, 0, :, -6:] = 40.0  # the tuned target of the last 6 columns leaves the frame
+    flows, _, _ = self_check(scene.frames, initial, leaving, person, config=config)
+    assert torch.equal(flows[..., -6:], initial[..., -6:])
+
+
+def test_the_frames_cannot_judge_an_occluded_pixel_by_the_forward_backward_check():
+    """A square moving right by 4 px over a still background: the background it covers in frame
+    t+1 is flagged (the backward flow there is the square's, not the background's), the rest not."""
+    from lit_boot.bootstrap.selfcheck import unjudged_pixels
+
+    forward, backward = torch.zeros(1, 2, 32, 32), torch.zeros(1, 2, 32, 32)
+    forward[0, 0, 10:20, 10:20] = 4.0  # the square, frame t
+    backward[0, 0, 10:20, 14:24] = -4.0  # the square, frame t+1, moving back
+    flagged = unjudged_pixels(forward, backward)[0]
+    assert flagged[10:20, 20:24].all()  # covered by the square in t+1: occluded
+    assert not flagged[10:20, 10:20].any() and not flagged[:10].any() and not flagged[20:].any()

@@ -2,6 +2,8 @@
 and the evidence gate), where its self-check kept the tuned flow, where the zoom stage kept its
 zoomed flow, and the stages rolled back.
 
+- :func:`save_mask` / :func:`load_mask`: one (T-1, H, W) bool map (the initial stage's
+  ``unjudged.npz``: the pixels the frames cannot judge, :func:`~.selfcheck.unjudged_pixels`).
 - :func:`save_decisions` / :func:`load_decisions`: a flow or zoom stage's maps in
   ``stages/<stage>/decisions.npz`` (``painted`` (T-1, H, W) uint8 0/1; ``kept`` (T-1, H, W)
   uint8, the stage's own flow's weight x 255: all 255 without a self-check; the zoom stage's
@@ -25,12 +27,25 @@ import torch
 
 from ..data.atomic import atomic_write_bytes
 
-__all__ = ["save_decisions", "load_decisions", "final_decisions", "decision_summary", "decision_image",
+__all__ = ["save_mask", "load_mask", "save_decisions", "load_decisions", "final_decisions", "decision_summary", "decision_image",
            "decision_map", "decision_key", "target_line", "DECISION_COLOURS"]
 
 #: RGB of the painted target pixels, of where a tuned flow was kept and of where the zoom stage's
 #: zoomed flow was kept (RAFT's flow: the frame in grey).
 DECISION_COLOURS = {"painted": (255, 140, 0), "kept": (40, 110, 255), "zoom": (225, 40, 200)}
+
+
+def save_mask(path: str | os.PathLike, mask: torch.Tensor) -> None:
+    """Write a (T-1, H, W) bool map atomically (compressed ``mask``, uint8 0/1)."""
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, mask=mask.bool().cpu().numpy().astype(np.uint8))
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+def load_mask(path: str | os.PathLike) -> torch.Tensor:
+    """The (T-1, H, W) bool map of :func:`save_mask`."""
+    with np.load(path) as data:
+        return torch.from_numpy(data["mask"] > 0)
 
 
 def save_decisions(path: str | os.PathLike, painted: torch.Tensor, kept: torch.Tensor) -> None:

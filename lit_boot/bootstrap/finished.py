@@ -89,7 +89,7 @@ def read_run(
     run_dir = Path(run_dir)
     summary = read_summary(run_dir)
     history = summary.get("stages", [])
-    mode = summary.get("config", {}).get("mode", "3d")
+    mode = summary.get("plan", {}).get("mode") or summary.get("config", {}).get("mode", "3d")  # the mode that ran
     initial = read_flows(run_dir / "stages" / "initial" / "flows.npz")
     kept = [r for r in history if r.get("kind") in ("flow", "zoom") and not r.get("rolled_back")]
     stage = kept[-1]["stage"] if kept else None

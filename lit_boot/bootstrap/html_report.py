@@ -75,8 +75,10 @@ def _header(run: FinishedRun) -> str:
     stages = " → ".join(r["stage"] + (" (rolled back)" if r.get("rolled_back") else "") for r in run.history)
     seconds = summary.get("speed", {}).get("total_s")
     took = f" · {seconds:.0f} s" if isinstance(seconds, (int, float)) else ""
-    meta = (f"{T} frames, {W}x{H} px · {config.get('mode', '?')} mode, preset {config.get('preset', '?')} · "
+    meta = (f"{T} frames, {W}x{H} px · {run.mode} mode, preset {config.get('preset', '?')} · "
             f"{summary.get('device', '?')}, {summary.get('precision', '?')}{took} · stages: {stages}")
+    why = summary.get("plan", {}).get("why")
+    meta += f" · what ran and why: {why}" if why else ""
     return (f"<h1>lit-boot run report: {esc(name)}</h1><p class=\"meta\">{esc(meta)}<br>run folder "
             f"{esc(str(run.run_dir))} · lit-boot {esc(str(summary.get('lit_boot', '?')))}</p>")  # fmt: skip
 

@@ -27,8 +27,11 @@ NEUTRAL_METRICS = ("drift_px",)
 #: One legend line per metric family (lit_boot.metrics.suite's and lit_boot.bootstrap.evaluate's), in order.
 METRIC_LEGEND = (
     (("epe", "epe_person", "epe_background", "epe_joints"),
-     "flow end-point error vs the GT flow over valid, non-occluded pixels: all, on / off the GT "
-     "person mask, at the GT joints"),
+     "flow end-point error vs the GT flow over valid pixels that stay visible in frame t+1 (Sintel's "
+     "matched): all of them, on / off the GT person mask, at the GT joints"),
+    (("epe_unmatched", "epe_all_pixels"),
+     "flow end-point error vs the GT flow over the valid pixels occluded in frame t+1 (Sintel's "
+     "unmatched: the frames cannot judge them), and over every valid pixel (Sintel's all)"),
     (("mpjpe_mm", "pa_mpjpe_mm"), "3D joint error vs GT, root-aligned / after Procrustes alignment"),
     (("accel_mm_per_frame2",), "acceleration error vs GT (jitter)"),
     (("proj2d_px",), "the 3D joints projected by the cameras vs the GT 2D joints"),

@@ -14,6 +14,7 @@ from .config import BootstrapConfig
 from .decisions import decision_summary
 from .html_report import write_report
 from .overlay import other_people
+from .plan import Plan
 from .report import overlay_frames, plot_history, video_fps, write_video
 from .result import BootstrapResult
 
@@ -21,10 +22,11 @@ __all__ = ["write_outputs", "write_overlay_video", "speed_summary"]
 
 
 def speed_summary(result: BootstrapResult) -> dict[str, float]:
-    """Wall time of the stages, RAFT inference alone (the initial stage), their ratio, and
-    seconds per frame."""
+    """Wall time of the stages, RAFT inference alone (the initial stage's forward pass), their
+    ratio, and seconds per frame."""
     total = sum(result.seconds.values())
-    raft = result.seconds.get("initial", float("nan"))
+    initial = next((r["info"] for r in result.history if r["stage"] == "initial"), {})
+    raft = initial.get("raft_seconds", result.seconds.get("initial", float("nan")))
     frames = result.scene.num_frames
     return {"total_s": total, "raft_inference_s": raft, "ratio_to_raft": total / raft if raft else float("nan"),
             "s_per_frame": total / frames, "frames": frames}  # fmt: skip
@@ -34,12 +36,14 @@ def write_outputs(
     result: BootstrapResult,
     *,
     settings: dict[str, Any],
+    plan: Plan,
     guard_events: list[dict[str, Any]],
     accelerator: str,
     precision: str,
     config: BootstrapConfig,
 ) -> None:
-    """Write the run folder's final files (each atomically)."""
+    """Write the run folder's final files (each atomically); summary.json holds ``settings`` (as
+    asked) and ``plan`` (what the scene's evidence let the run do: :mod:`~.plan`)."""
     out = result.run_dir
     if config.flow_format == "npz":
         write_flows_npz(out / "flows" / "flows.npz", result.flows)
@@ -54,7 +58,8 @@ def write_outputs(
             atomic_write_bytes(out / name, weights.read_bytes())
     device = torch.cuda.get_device_name() if accelerator == "cuda" else "cpu"
     summary = {
-        "format": "lit-boot-bootstrap", "version": 1, **settings, "device": device, "precision": precision,
+        "format": "lit-boot-bootstrap", "version": 1, **settings, "plan": plan.to_dict(), "device": device,
+        "precision": precision,
         "stages": result.history, "before_after": {k: list(v) for k, v in result.before_after().items()},
         "speed": speed_summary(result), "drift_guard_events": guard_events,
         "decisions": decision_summary(result.history),

@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +38,7 @@ from ..pose import REFINERS, PoseResult, load_pose_result
 from ..quiet import quiet_lightning
 from .config import BootstrapConfig
 from .dashboard import log_stage_images, log_summary, stage_header
-from .decisions import final_decisions, load_decisions, target_line
+from .decisions import final_decisions, load_decisions, load_mask, save_mask, target_line
 from .ensemble import average_poses
 from .evaluate import agreement, drift, person_height, photo_error, pose_track_error
 from .folder import STAGE_JSON, RunFolder
@@ -46,9 +46,10 @@ from .guard import drift_guard, guard_text
 from .interrupt import RunInterrupted, interruptible
 from .lock import RunLock
 from .outputs import write_outputs
+from .plan import Plan, plan_run
 from .result import BootstrapResult
 from .selfcheck import check_stage, people_shares, summary_line
-from .stages import fine_tune_flow, make_flow_model, predict_flows, quiet_refiner, refine_poses_stage
+from .stages import fine_tune_flow, make_flow_model, predict_flows, quiet_refiner, refine_poses_stage, unjudged_flows
 from .zoom import zoom_line, zoom_stage
 
 __all__ = ["Bootstrap", "BootstrapResult", "RunInterrupted", "bootstrap", "STAGE_JSON"]
@@ -63,7 +64,9 @@ class _RunState:
     facts. ``initial`` is pretrained RAFT's flow, ``reference`` the flow the next flow stage is
     checked against and taught from: the last flow-making stage's (initial, zoom or flow), so
     that a stage cannot undo what the one before it gained where the frames can tell;
-    ``decisions`` where the flow so far comes from (:func:`~.decisions.final_decisions`)."""
+    ``decisions`` where the flow so far comes from (:func:`~.decisions.final_decisions`);
+    ``unjudged`` the pixels the frames cannot judge (:func:`~.selfcheck.unjudged_pixels`, when the
+    flow stages are self-checked)."""
 
     scene: Scene
     initial_scene: Scene
@@ -79,6 +82,7 @@ class _RunState:
     history: list[dict[str, Any]] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
     decisions: dict[str, torch.Tensor] | None = None
+    unjudged: torch.Tensor | None = None
 
 
 class Bootstrap:
@@ -105,7 +109,8 @@ class Bootstrap:
     ):
         if config is not None and options:
             raise ValueError(f"give either config or options, not both (got options {sorted(options)})")
-        self.config = config or BootstrapConfig(**options)
+        self.requested = self.config = config or BootstrapConfig(**options)
+        self.plan: Plan | None = None  # what the scene's evidence lets the run do (set by run())
         self.scene_arg = scene
         self.scene = scene if isinstance(scene, Scene) else None
         name = scene.name if isinstance(scene, Scene) else Path(scene).name
@@ -118,16 +123,18 @@ class Bootstrap:
     # --- inputs and settings: checked before anything is written ----------------------------------
     def _settings(self) -> dict[str, Any]:
         scene = str(self.scene_arg) if not isinstance(self.scene_arg, Scene) else f"<Scene {self.scene_arg.name}>"
-        return {"lit_boot": __version__, "scene": scene, "config": self.config.to_dict()}
+        return {"lit_boot": __version__, "scene": scene, "config": self.requested.to_dict()}
 
     def _inputs(self) -> Scene:
-        """The scene (loaded, checked for the mode) with the pose ensemble averaged in."""
-        cfg = self.config
+        """The scene (loaded) with the pose ensemble averaged in; sets the run's :class:`Plan`
+        (what the scene's evidence allows: :func:`~.plan.plan_run`) and ``config`` to the
+        requested one in the plan's mode."""
         scene = self.scene if self.scene is not None else load_scene(self.scene_arg)
         if scene.num_frames < 2:
             raise ValueError(f"scene {scene.name!r}: needs at least 2 frames, has {scene.num_frames}")
-        scene.require_pose(cfg.mode)
-        return average_poses(scene, cfg.pose_ensemble, cfg.mode)
+        self.plan = plan_run(self.requested, scene)
+        self.config = replace(self.requested, mode=self.plan.mode)
+        return average_poses(scene, self.config.pose_ensemble, self.config.mode)
 
     def _build(self, person_px: float) -> None:
         """Build every ensemble member (loading its weights: missing, unreadable, unfit or
@@ -182,7 +189,7 @@ class Bootstrap:
         (:mod:`~lit_boot.bootstrap.decisions`)."""
         cfg, n = self.config, len(self.models)
         what = f"FlowTTT x{n}, {cfg.epochs} epochs, {st.precision} on {st.accelerator}"
-        log.info(stage_header(index, len(cfg.stages()), name, what))
+        log.info(stage_header(index, len(self.plan.stages), name, what))
         flows, reports = [], []
         for m in range(n):
             model = self._model(m, st.person_px, fresh=cfg.restart_flow)
@@ -193,7 +200,7 @@ class Bootstrap:
             flows.append(predict_flows(model, st.scene, accelerator=st.accelerator, precision=st.precision))
         mean = torch.stack(flows).mean(0)
         person = person_region(self.models[0].sketch_masks)
-        mean, check, kept = check_stage(cfg, st.scene, st.reference, mean, person)
+        mean, check, kept = check_stage(cfg, st.scene, st.reference, mean, person, st.unjudged)
         record = {**scene_flow_metrics(st.scene.gt, mean, st.scene.track_id),
                   "drift_px": drift(mean, st.initial, person),
                   "agreement_px": agreement(mean, *st.scene.pose_points(cfg.mode)),
@@ -223,7 +230,7 @@ class Bootstrap:
         """RAFT (ensemble member 0, pretrained) on a zoomed crop around the person of every pair,
         kept unless the frames refuse it (:func:`~lit_boot.bootstrap.zoom.zoom_stage`)."""
         cfg = self.config
-        log.info(stage_header(index, len(cfg.stages()), name, f"RAFT zoomed on the person, on {st.accelerator}"))
+        log.info(stage_header(index, len(self.plan.stages), name, f"RAFT zoomed on the person, on {st.accelerator}"))
         record, flows, decisions = zoom_stage(self._model(0, st.person_px).raft, st.scene, st.initial, mode=cfg.mode,
                                               config=cfg.zoom, device="cuda" if st.accelerator == "cuda" else "cpu")
         log.info(zoom_line(record["info"]["zoom"], flows.shape[0]))
@@ -234,7 +241,7 @@ class Bootstrap:
         scene with the refined poses."""
         cfg = self.config
         what = f"{REFINERS[cfg.mode].__name__}, {cfg.pose_steps} steps on {cfg.pose_accelerator}"
-        log.info(stage_header(index, len(cfg.stages()), name, what))
+        log.info(stage_header(index, len(self.plan.stages), name, what))
         result = refine_poses_stage(st.scene, st.flows, mode=cfg.mode, kwargs=cfg.pose_kwargs(), steps=cfg.pose_steps,
                                     early_stop=cfg.early_stop, accelerator=cfg.pose_accelerator,
                                     loggers=self._loggers(name), progress_bar=cfg.progress_bar)  # fmt: skip
@@ -255,7 +262,7 @@ class Bootstrap:
             st.initial = read_flows(folder / "flows.npz")
         else:
             n = len(self.models)
-            log.info(stage_header(0, len(cfg.stages()), "initial", f"RAFT inference x{n} on {st.accelerator}"))
+            log.info(stage_header(0, len(self.plan.stages), "initial", f"RAFT inference x{n} on {st.accelerator}"))
             start = time.perf_counter()
             try:
                 flows = [predict_flows(self._model(m, st.person_px), st.scene, accelerator=st.accelerator,
@@ -271,9 +278,18 @@ class Bootstrap:
                       "agreement_px": agreement(st.initial, *points), "photo_error": photo_error(st.scene.frames, st.initial),
                       "track_error": pose_track_error(st.scene.frames, *points),
                       "info": {"seconds": time.perf_counter() - start, "person_px": st.person_px}}  # fmt: skip
+            record["info"]["raft_seconds"] = record["info"]["seconds"]  # the forward pass alone
             folder.mkdir(parents=True, exist_ok=True)
             write_flows_npz(folder / "flows.npz", st.initial)
+            if cfg.checking != "off":
+                models = [self._model(m, st.person_px) for m in range(len(self.models))]
+                unjudged = unjudged_flows(models, st.scene, st.initial, accelerator=st.accelerator,
+                                          precision=st.precision)  # fmt: skip
+                save_mask(folder / "unjudged.npz", unjudged)
+                record["info"]["seconds"] = time.perf_counter() - start
             self.folder.write_record("initial", record)
+        if cfg.checking != "off":
+            st.unjudged = load_mask(folder / "unjudged.npz") if (folder / "unjudged.npz").is_file() else None
         st.flows = st.reference = st.initial
         st.history.append(record)
         st.seconds["initial"] = record["info"]["seconds"]
@@ -371,22 +387,23 @@ class Bootstrap:
             return self._run()
 
     def _run(self) -> BootstrapResult:
-        cfg = self.config
         self.folder.check(self._settings())  # nothing is written before inputs and settings are known good
         scene = self._inputs()
+        cfg = self.config  # the requested settings in the plan's mode
+        log.info(f"[lit-boot] {self.plan.why}")
         L.seed_everything(cfg.seed, verbose=False)
         person_px = person_height(*scene.pose_points(cfg.mode))
         self._build(person_px)
         with RunLock(self.out):
             self.folder.prepare(self._settings())
-            stages = ["initial", *cfg.stages()]
+            stages = ["initial", *self.plan.stages]
             if done := self.folder.finished(stages):
                 log.info(f"[lit-boot] resuming {self.out}: {', '.join(done)} already done (loaded, not run again)")
             with interruptible(self.out, lambda: ([None, *self.folder.finished(stages)])[-1]):  # Ctrl-C
                 loggers = self._loggers("summary")  # rebuilt whole on every (resumed) run: no duplicates
                 st = _RunState(scene, scene, person_px, self._accelerator(), self._precision(), loggers)
                 self._initial_stage(st)
-                for index, name in enumerate(cfg.stages(), start=1):
+                for index, name in enumerate(self.plan.stages, start=1):
                     record = self.folder.record(name)
                     go_on = self._run_stage(st, index, name) if record is None else \
                         self._load_stage(st, index, name, record)  # fmt: skip
@@ -401,8 +418,8 @@ class Bootstrap:
         out = BootstrapResult(run_dir=self.out, scene=st.scene, initial_scene=st.initial_scene,
                               initial_flows=st.initial, flows=st.flows, poses=st.result, history=st.history,
                               seconds=st.seconds, decisions=st.decisions)  # fmt: skip
-        write_outputs(out, settings=self._settings(), guard_events=guard_events, accelerator=st.accelerator,
-                      precision=st.precision, config=self.config)  # fmt: skip
+        write_outputs(out, settings=self._settings(), plan=self.plan, guard_events=guard_events,
+                      accelerator=st.accelerator, precision=st.precision, config=self.config)  # fmt: skip
         return out
 
 

@@ -1,7 +1,8 @@
 """The method's stages as the orchestrator runs them, each with its own Lightning Trainer.
 
 - :func:`predict_flows`: RAFT's flow for every pair of a scene (the initial flow, and each flow
-  stage's result);
+  stage's result); :func:`predict_backward_flows` the same from frame t+1 to frame t, and
+  :func:`unjudged_flows` where the frames cannot judge a flow (the self-check's);
 - :func:`fine_tune_flow`: FlowTTT on the stick-man drawn from the scene's current poses;
 - :func:`refine_poses_stage`: PoseRefiner (3D) or KeypointRefiner (2D) against a flow.
 
@@ -25,9 +26,10 @@ from ..flow import FlowTTT, SceneFlowData, SketchConfig
 from ..flow.data import SOURCE_OF_MODE
 from ..pose import KeypointRefiner, PoseData, PoseRefiner, PoseResult
 from ..pose.api import make_refiner, make_trainer
+from .selfcheck import unjudged_pixels
 from ..progress import progress_bar as make_progress_bar
 
-__all__ = ["make_flow_model", "predict_flows", "fine_tune_flow", "refine_poses_stage", "require_finite",
+__all__ = ["make_flow_model", "predict_flows", "predict_backward_flows", "unjudged_flows", "fine_tune_flow", "refine_poses_stage", "require_finite",
            "quiet_refiner"]
 
 
@@ -82,6 +84,23 @@ def predict_flows(
     flows = torch.cat([o["flow"].float().cpu() for o in out])[order]
     require_finite("flows", flows)
     return flows
+
+
+def predict_backward_flows(
+    model: FlowTTT, scene: Scene, *, accelerator: str, precision: str
+) -> torch.Tensor:
+    """``model``'s flow t+1 -> t (T-1, 2, H, W) px for every pair t (the frames run in reverse)."""
+    reverse = Scene(frames=scene.frames.flip(0), fps=scene.fps, name=scene.name)
+    return predict_flows(model, reverse, accelerator=accelerator, precision=precision).flip(0)
+
+
+def unjudged_flows(models: list[FlowTTT], scene: Scene, forward: torch.Tensor, *, accelerator: str,
+                   precision: str) -> torch.Tensor:  # fmt: skip
+    """Where the frames cannot judge a change of ``forward`` (T-1, 2, H, W) px, the models' mean
+    flow: (T-1, H, W) bool, the forward-backward check against the models' mean backward flow
+    (:func:`~.selfcheck.unjudged_pixels`; one more RAFT pass per model)."""
+    backward = [predict_backward_flows(m, scene, accelerator=accelerator, precision=precision) for m in models]
+    return unjudged_pixels(forward, torch.stack(backward).mean(0))
 
 
 def fine_tune_flow(

@@ -150,9 +150,12 @@ def evidence_sentence(tally: EvidenceTally, history: Sequence[dict[str, Any]]) -
 
 
 #: Ground-truth metrics named in :func:`gt_sentence`, with their words.
-GT_WORDS = (("epe", "the flow's end-point error, all pixels"), ("epe_person", "on the person"),
-            ("epe_background", "on the background"), ("mpjpe_mm", "the 3D joint error (MPJPE)"),
-            ("kp2d_px", "the 2D keypoint error"))  # fmt: skip
+GT_WORDS = (("epe_all_pixels", "the flow's end-point error on every valid pixel (Sintel's all)"),
+            ("epe", "on the pixels that stay visible (matched)"), ("epe_unmatched", "on the occluded (unmatched)"),
+            ("epe_person", "on the person"), ("epe_background", "on the background"),
+            ("mpjpe_mm", "the 3D joint error (MPJPE)"), ("kp2d_px", "the 2D keypoint error"))  # fmt: skip
+#: ``epe``'s words where the ground truth marks no occlusions (no ``epe_all_pixels``).
+EPE_WORDS = "the flow's end-point error on the valid pixels"
 
 
 def gt_sentence(history: Sequence[dict[str, Any]]) -> str | None:
@@ -160,7 +163,8 @@ def gt_sentence(history: Sequence[dict[str, Any]]) -> str | None:
     before -> after and the change."""
     values = before_after(history)
     parts = []
-    for key, words in GT_WORDS:
+    words_of = dict(GT_WORDS) | ({} if "epe_all_pixels" in values else {"epe": EPE_WORDS})
+    for key, words in words_of.items():
         if key in values and all(math.isfinite(v) for v in values[key]):
             a, b = values[key]
             unit = "mm" if key.endswith("_mm") else "px"

@@ -67,6 +67,16 @@ class Person:
             out["cameras"] = Cameras(cams.model, fn(cams.params), crops, cams.crop_size)
         return dataclasses.replace(self, **out)
 
+    def posed(self) -> torch.Tensor:
+        """(T,) bool: frames where the person's pose was estimated, a keypoint of confidence > 0
+        (every frame when there are no confidences). Elsewhere an estimator's 3D joints and
+        camera are a neighbour frame's, filled in: no evidence of the pose in that frame."""
+        if self.keypoints_conf is not None:
+            return (self.keypoints_conf > 0).any(-1)
+        T = next(getattr(self, k).shape[0] for k in ("joints3d", "keypoints2d", "person_boxes")
+                 if getattr(self, k) is not None)  # fmt: skip
+        return torch.ones(T, dtype=torch.bool)
+
     def found(self) -> torch.Tensor:
         """(T,) bool: frames where the person has a keypoint of confidence > 0 or a box."""
         T = next(getattr(self, k).shape[0] for k in ("keypoints_conf", "person_boxes", "joints3d")

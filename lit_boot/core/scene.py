@@ -79,6 +79,15 @@ class GroundTruth:
         mask = self.flow_valid if self.flow_valid is not None else torch.ones_like(self.flow[:, 0], dtype=torch.bool)
         return mask & ~self.flow_occluded if self.flow_occluded is not None else mask
 
+    def unmatched_mask(self) -> torch.Tensor | None:
+        """The valid pixels occluded in frame t+1 (Sintel's "unmatched"), (T-1, H, W) bool; None
+        without a GT flow or without occlusions. With :meth:`flow_mask` (the matched pixels) they
+        make Sintel's "all"."""
+        if self.flow is None or self.flow_occluded is None:
+            return None
+        mask = self.flow_valid if self.flow_valid is not None else torch.ones_like(self.flow[:, 0], dtype=torch.bool)
+        return mask & self.flow_occluded
+
     def truths(self, track_ids: Sequence[int]) -> list[PersonTruth | None]:
         """Each person's truth, in ``track_ids`` order: the first id is the main person (this
         GroundTruth's own joints and keypoints; its visible mask the person mask less the

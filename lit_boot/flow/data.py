@@ -15,7 +15,7 @@ import lightning as L
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from ..core import Scene, get_layout
+from ..core import Person, Scene, get_layout
 from ..data import load_scene
 
 __all__ = ["POSE_SOURCES", "MODE_OF_SOURCE", "SketchInputs", "ScenePairs", "SceneFlowData"]
@@ -62,6 +62,7 @@ def sketch_inputs(scene: Scene, source: str = "auto") -> SketchInputs:
         layout = scene.pose_layout(mode)
         if mode == "3d":
             depths = scene.joints3d[..., 2].float()
+            conf = _posed(scene, joints)
         else:
             conf = scene.keypoints_conf
     else:
@@ -80,10 +81,16 @@ def sketch_inputs(scene: Scene, source: str = "auto") -> SketchInputs:
     )
 
 
+def _posed(person: Scene, joints: torch.Tensor) -> torch.Tensor:
+    """A 3D pose's confidences (T, J): 1 in the frames where the person's pose was estimated
+    (:meth:`~lit_boot.core.Person.posed`), 0 where its joints are only a neighbour frame's, filled
+    in (drawn, they would paint the neighbour's pose with no motion)."""
+    return Person.of(person).posed().float()[:, None].expand(joints.shape[:2])
+
+
 def _people_inputs(scene: Scene, mode: str) -> SketchInputs:
     """Every person's joints of ``mode`` (a person axis after the pair's). In 3D a person counts
-    in the frames where it has a keypoint of confidence > 0 (every frame without keypoints):
-    elsewhere its joints are only a neighbour frame's, filled in."""
+    in the frames where its pose was estimated (:func:`_posed`)."""
     joints, conf, depths = [], [], []
     for p in range(scene.num_people):
         person = scene.person(p)
@@ -95,9 +102,7 @@ def _people_inputs(scene: Scene, mode: str) -> SketchInputs:
         if mode == "2d":
             conf.append(person.keypoints_conf.float())
         else:
-            seen = person.keypoints_conf
-            seen = torch.ones(points.shape[0]) if seen is None else (seen > 0).any(-1).float()
-            conf.append(seen[:, None].expand(points.shape[:2]))
+            conf.append(_posed(person, points))
             depths.append(person.joints3d[..., 2].float())
     joints, conf = torch.stack(joints, 1), torch.stack(conf, 1)
     return SketchInputs(layout=get_layout(scene.pose_layout(mode)).name, joints_t=joints[:-1], joints_t1=joints[1:],
@@ -107,12 +112,14 @@ def _people_inputs(scene: Scene, mode: str) -> SketchInputs:
 
 class ScenePairs(Dataset):
     """Pairs (t, t+1) of one scene as dicts: image1, image2 (3, H, W) uint8, index; and gt_flow
-    (2, H, W), gt_valid (H, W: where the flow is scored, GroundTruth.flow_mask), person (H, W),
-    gt_joints (J, 2) at t and gt_joints_next at t+1 when the scene has them."""
+    (2, H, W), gt_valid (H, W: where the flow is scored, GroundTruth.flow_mask: Sintel's matched),
+    gt_unmatched (H, W: the valid pixels occluded in frame t+1, GroundTruth.unmatched_mask), person
+    (H, W), gt_joints (J, 2) at t and gt_joints_next at t+1 when the scene has them."""
 
     def __init__(self, scene: Scene):
         self.scene = scene
         self.flow_mask = scene.gt.flow_mask() if scene.gt is not None else None  # once, not per pair
+        self.unmatched = scene.gt.unmatched_mask() if scene.gt is not None else None
 
     def __len__(self) -> int:
         return self.scene.num_frames - 1
@@ -124,6 +131,8 @@ class ScenePairs(Dataset):
         if gt is not None and gt.flow is not None:
             item["gt_flow"] = gt.flow[i].float()
             item["gt_valid"] = self.flow_mask[i]  # valid and not occluded, as the orchestrator scores
+            if self.unmatched is not None:
+                item["gt_unmatched"] = self.unmatched[i]
         if gt is not None and gt.person_mask is not None:
             item["person"] = gt.person_mask[i]
         if gt is not None and gt.joints2d is not None:

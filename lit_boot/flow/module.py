@@ -391,7 +391,7 @@ class FlowTTT(L.LightningModule):
         flow = self._predict(batch)
         idx = batch["index"].cpu()
         self.val_metrics.update(flow, batch.get("gt_flow"), batch.get("gt_valid"), batch.get("person"),
-                                batch.get("gt_joints"), batch.get("gt_joints_next"))  # fmt: skip
+                                batch.get("gt_joints"), batch.get("gt_joints_next"), batch.get("gt_unmatched"))  # fmt: skip
         if self.original is not None and self.sketch_masks is not None:
             outside = ~person_region(self.sketch_masks[idx]).to(self.device)
             self.val_drift.update(flow, self.original[idx].to(self.device), outside)

@@ -4,8 +4,8 @@ A scene's *states* are the float64 sum states of the ``Metric`` objects behind
 :func:`~lit_boot.metrics.scene_flow_metrics` and :func:`~lit_boot.metrics.scene_pose_metrics`,
 as plain floats ``{metric name: {state name: value}}`` (JSON-ready, exact):
 
-- ``epe``, ``epe_person``, ``epe_background``, ``epe_joints``: ``{"epe_sum", "count"}`` (px, pixels
-  or joints);
+- ``epe``, ``epe_unmatched``, ``epe_all_pixels``, ``epe_person``, ``epe_background``, ``epe_joints``:
+  ``{"epe_sum", "count"}`` (px, pixels or joints);
 - ``mpjpe_mm``, ``pa_mpjpe_mm``, ``accel_mm_per_frame2``, ``proj2d_px``, ``kp2d_px``:
   ``{"error_sum", "count"}`` (mm, mm/frame^2 or px; joints of frames);
 - with several people, the same under the pooled and per-person names (``kp2d_px_all``,

@@ -3,8 +3,10 @@
 Names (the same everywhere: FlowTTT's and the refiners' validation, the orchestrator's stage
 records, summary.json, :class:`~lit_boot.pose.PoseResult`):
 
-- flow, px: ``epe`` (every valid, non-occluded pixel: :meth:`GroundTruth.flow_mask`),
-  ``epe_person`` / ``epe_background`` (those pixels on / off the GT person mask of frame t),
+- flow, px: ``epe`` (every valid, non-occluded pixel: :meth:`GroundTruth.flow_mask`; Sintel's
+  "matched"), ``epe_unmatched`` (the valid pixels occluded in frame t+1) and ``epe_all_pixels``
+  (every valid pixel, occluded or not: Sintel's "all"; both where the GT marks occlusions),
+  ``epe_person`` / ``epe_background`` (the matched pixels on / off the GT person mask of frame t),
   ``epe_joints`` (the authors' convention: each GT joint's displacement t -> t+1 against the
   flow at the joint's rounded pixel, joints inside the image);
 - 3D poses, mm: ``mpjpe_mm`` (root-aligned, the layout's root), ``pa_mpjpe_mm`` (Procrustes),
@@ -66,14 +68,16 @@ def _values(metrics: dict[str, Metric]) -> dict[str, float]:
 
 
 class FlowMetrics(torch.nn.Module):
-    """``epe``, ``epe_person``, ``epe_background``, ``epe_joints`` (px), accumulated over
-    batches of pairs (torchmetrics sum states); :meth:`compute` holds only those updated, each
-    name prefixed by ``prefix`` (e.g. ``"val/"``)."""
+    """``epe``, ``epe_unmatched``, ``epe_all_pixels``, ``epe_person``, ``epe_background``,
+    ``epe_joints`` (px), accumulated over batches of pairs (torchmetrics sum states);
+    :meth:`compute` holds only those updated, each name prefixed by ``prefix`` (e.g. ``"val/"``)."""
 
     def __init__(self, prefix: str = ""):
         super().__init__()
         self.prefix = prefix
         self.epe = EndPointError()
+        self.epe_unmatched = EndPointError()
+        self.epe_all_pixels = EndPointError()
         self.epe_person = EndPointError()
         self.epe_background = EndPointError()
         self.epe_joints = PointEndPointError(mode="nearest")
@@ -86,12 +90,17 @@ class FlowMetrics(torch.nn.Module):
         person: Tensor | None = None,
         joints: Tensor | None = None,
         joints_next: Tensor | None = None,
+        unmatched: Tensor | None = None,
     ) -> None:
         """flow, gt_flow: (B, 2, H, W) px; mask: (B, H, W) bool, the pixels that count (valid and
-        not occluded); person: (B, H, W) bool; joints, joints_next: (B, K, 2) px, the GT joints
-        in frames t and t+1. What is None is not scored."""
+        not occluded: matched); person: (B, H, W) bool; joints, joints_next: (B, K, 2) px, the GT
+        joints in frames t and t+1; unmatched: (B, H, W) bool, the valid pixels occluded in frame
+        t+1 (``epe_unmatched``, and with ``mask`` ``epe_all_pixels``). What is None is not scored."""
         if gt_flow is not None:
             self.epe.update(flow, gt_flow, mask)
+        if gt_flow is not None and unmatched is not None:
+            self.epe_unmatched.update(flow, gt_flow, unmatched)
+            self.epe_all_pixels.update(flow, gt_flow, unmatched | mask if mask is not None else None)
         if gt_flow is not None and person is not None:
             self.epe_person.update(flow, gt_flow, mask & person)
             self.epe_background.update(flow, gt_flow, mask & ~person)
@@ -161,7 +170,8 @@ def _flow_metric_objects(gt: GroundTruth, flows: Tensor, person: Tensor | None,
     joints = joints.float() if joints is not None else None
     metrics.update(flows.float(), gt.flow.float() if gt.flow is not None else None, gt.flow_mask(),
                    person[:-1] if person is not None else None,
-                   joints[:-1] if joints is not None else None, joints[1:] if joints is not None else None)  # fmt: skip
+                   joints[:-1] if joints is not None else None, joints[1:] if joints is not None else None,
+                   gt.unmatched_mask())  # fmt: skip
     return metrics.updated()
 
 

@@ -6,7 +6,7 @@ metres, as for the authors) and per-frame camera variables C (T, 3) (see
 beta 1, summed over elements, averaged over frames, times its lambda)::
 
     L = opt * L_opt(P(X, C); F)          projected motion vs the flow, px
-      + joints3d * |X - X0|              deviation from the initial joints, m
+      + joints3d * |X - X0|              deviation from the initial joints, m (frames with a pose)
       + keypoints2d * c |P(X, C) - x|    agreement with the detector, px
       + pos * |X_t - X_t-1|              joint smoothness, m
       + cam * |C_t - C_t-1|              camera smoothness
@@ -14,7 +14,10 @@ beta 1, summed over elements, averaged over frames, times its lambda)::
       + proj_smooth * |P_t - P_t-1|      2D smoothness (the authors' code, lambda 0), px
 
 Every person of a scene is refined at once, each with its own cameras: joints (T, P, J, 3),
-camera variables (T, P, 3) (:mod:`lit_boot.pose.people`).
+camera variables (T, P, 3) (:mod:`lit_boot.pose.people`). The deviation term holds a person's
+joints to the estimates only in the frames where the pose was estimated
+(:meth:`~lit_boot.core.Person.posed`): elsewhere the estimator's joints are a neighbour frame's,
+filled in, and the flow, the smoothness and the bone lengths place them.
 """
 
 from __future__ import annotations
@@ -129,9 +132,10 @@ class PoseRefiner(RefinerBase):
         self.register_buffer("keypoints", keypoints, persistent=False)
         self.register_buffer("keypoint_weight", weight, persistent=False)
         T, P, J = joints_m.shape[:3]
+        posed = torch.stack([p.posed() for p in people], 1)[:, :, None].expand(T, P, J).reshape(T, P * J)
         self.objective = Objective([
             Term("opt", (T - 1, P * J, 2), w.opt),
-            Term("3d", (T, P * J, 3), w.joints3d),
+            Term("3d", (T, P * J, 3), w.joints3d, posed),
             Term("2d", (T, P * J, 2), w.keypoints2d if keypoints is not None else 0.0, weight),
             Term("pos", (T - 1, P * J, 3), w.pos),
             Term("cam", (T - 1, P * 3), w.cam),
