@@ -49,7 +49,7 @@ def one_thread():
 
 
 def without_timings(record: dict) -> dict:
-    info = {k: v for k, v in record["info"].items() if k != "seconds"}
+    info = {k: v for k, v in record["info"].items() if k not in ("seconds", "raft_seconds")}
     if "zoom" in info:  # the zoom stage's own timing
         info["zoom"] = {k: v for k, v in info["zoom"].items() if k != "seconds"}
     return {**record, "info": info}

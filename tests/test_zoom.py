@@ -188,8 +188,10 @@ def test_zoom_flows_records_every_pair(monkeypatch):
     flows, kept, record = zoom_flows(None, scene, base, boxes, ZoomConfig().for_mode("3d"))
     assert record["zoomed_pairs"] == 2 and len(record["per_pair"]) == 2
     assert kept[0].any() and kept[1].any() and record["kept_fraction"] == pytest.approx(float(kept.float().mean()))
-    assert torch.equal(flows[kept[:, None].expand_as(flows)], truth.expand_as(flows)[kept[:, None].expand_as(flows)])
-    assert torch.equal(flows[~kept[:, None].expand_as(flows)], base[~kept[:, None].expand_as(flows)])
+    whole, none = (kept == 1)[:, None].expand_as(flows), (kept == 0)[:, None].expand_as(flows)
+    assert torch.equal(flows[whole], truth.expand_as(flows)[whole])  # the zoomed flow where its weight is 1
+    assert torch.equal(flows[none], base[none])  # RAFT's where it is 0
+    torch.testing.assert_close(flows, base + kept[:, None] * (truth - base))  # a blend of the two between
     assert box_masks(boxes, (96, 128))[1, 30:61, 40:81].all() and not box_masks(boxes, (96, 128))[:, :30].any()
 
 
@@ -272,7 +274,7 @@ def test_the_zoom_makes_rafts_flow_on_the_person_better(shared):
     def epe(f, m):
         return float((f - gt.flow).norm(dim=1)[m].mean())
 
-    assert kept.any()
+    assert (kept > 0).any()
     assert epe(flows, person) < 0.9 * epe(base, person)
     assert epe(flows, background) <= epe(base, background) * 1.01
 
@@ -415,3 +417,30 @@ def test_the_zooms_cost_is_the_modes_unless_given(monkeypatch):
     fixed = zoom_stage(raft, scene, base, mode="2d", config=ZoomConfig(small_scale=8.0, max_cost=2.0), device="cpu")
     assert fixed[0]["info"]["zoom"]["per_pair"][0]["scale"] == pytest.approx(scale["3d"])
 
+
+
+def test_the_zoomed_flow_fades_in_inside_its_region_and_not_at_the_frames_edge():
+    """No step where the crop ends: 0 on the region's outermost row, 1 at FADE_PX px inside; a
+    side on the frame's edge does not fade (there is nothing beyond it to step from)."""
+    from lit_boot.bootstrap.zoom import FADE_PX, fade_in
+
+    weight = fade_in((10, 60, 0, 50), (80, 100))  # its left side is the frame's edge
+    assert weight[:10].eq(0).all() and weight[60:].eq(0).all() and weight[:, 50:].eq(0).all()
+    assert weight[10, 20] == 0 and weight[10 + FADE_PX // 2, 20] == pytest.approx(0.5)
+    assert weight[10 + FADE_PX, 20] == 1 and weight[35, 0] == 1  # inside, and along the frame's edge
+    assert weight[35, 49] == 0 and weight[35, 49 - FADE_PX] == 1
+
+
+def test_a_scattered_choice_is_made_coherent():
+    """A pixel keeps the candidate only where most of its 3x3 neighbourhood chose it: stray single
+    pixels go, regions stay, and a refused pixel is never given the candidate."""
+    from lit_boot.bootstrap.zoom import coherent
+    from lit_boot.metrics.coherence import speckle
+
+    choice = torch.zeros(20, 20, dtype=torch.bool)
+    choice[4:12, 4:12] = True  # a region
+    choice[15, 15] = True  # a stray pixel chosen
+    choice[7, 7] = False  # a stray pixel refused inside the region
+    out = coherent(choice)
+    assert not out[15, 15] and not out[7, 7] and out[5:11, 5:11].sum() == 35 and not out[:3].any()
+    assert speckle(out[None]) < speckle(choice[None])

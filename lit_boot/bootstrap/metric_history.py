@@ -19,7 +19,8 @@ __all__ = ["NOT_METRICS", "NEUTRAL_METRICS", "METRIC_LEGEND", "unit", "metric_va
            "before_after", "stage_series", "change_text", "verdict"]
 
 NOT_METRICS = ("stage", "kind", "cycle")
-_UNITS = (("_mm_per_frame2", "mm/frame²"), ("_px", "px"), ("_mm", "mm"), ("_error", "of 48"))
+_UNITS = (("_mm_per_frame2", "mm/frame²"), ("_px_per_frame2", "px/frame²"), ("_px", "px"), ("_mm", "mm"),
+          ("_error", "of 48"))
 
 #: Metrics that are not better when lower: a diagnostic, shown without "better" / "worse".
 NEUTRAL_METRICS = ("drift_px",)
@@ -43,6 +44,12 @@ METRIC_LEGEND = (
      "image evidence: census error of frame t against frame t+1 warped by the flow (0..48; needs no GT)"),
     (("track_error",),
      "image evidence: census error along the joint tracks from frame t to t+1 (0..48; needs no GT)"),
+    (("reprojection_px",),
+     "the 3D joints projected by the cameras vs the detector's 2D keypoints (needs no GT)"),
+    (("bone_variation",),
+     "bone-length constancy: each bone's standard deviation over the frames over its mean length (needs no GT)"),
+    (("jitter_mm_per_frame2", "jitter_px_per_frame2"),
+     "jitter: the joints' acceleration from frame to frame (needs no GT)"),
     (("drift_px",),
      "how far the flow outside the person moved from RAFT's (needs no GT; 0 before by definition; "
      "a diagnostic, neither better nor worse)"),

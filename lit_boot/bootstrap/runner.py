@@ -40,7 +40,7 @@ from .config import BootstrapConfig
 from .dashboard import log_stage_images, log_summary, stage_header
 from .decisions import final_decisions, load_decisions, load_mask, save_mask, target_line
 from .ensemble import average_poses
-from .evaluate import agreement, drift, person_height, photo_error, pose_track_error
+from .evaluate import agreement, drift, person_height, photo_error, pose_evidence, pose_track_error
 from .folder import STAGE_JSON, RunFolder
 from .guard import drift_guard, guard_text
 from .interrupt import RunInterrupted, interruptible
@@ -248,7 +248,7 @@ class Bootstrap:
         refined = result.apply_to(st.scene)
         points = refined.pose_points(cfg.mode)
         record = {**scene_pose_metrics(refined, cfg.mode), "agreement_px": agreement(st.flows, *points),
-                  "track_error": pose_track_error(refined.frames, *points),
+                  "track_error": pose_track_error(refined.frames, *points), **pose_evidence(refined, cfg.mode),
                   "info": {"steps": result.steps, "stopped_early": result.stopped_early,
                            "loss": result.loss}}  # fmt: skip
         return record, result, refined
@@ -275,8 +275,9 @@ class Bootstrap:
             record = {"stage": "initial", "kind": "initial", "cycle": 0,
                       **scene_flow_metrics(st.scene.gt, st.initial, st.scene.track_id),
                       **scene_pose_metrics(st.scene, cfg.mode),
-                      "agreement_px": agreement(st.initial, *points), "photo_error": photo_error(st.scene.frames, st.initial),
-                      "track_error": pose_track_error(st.scene.frames, *points),
+                      "agreement_px": agreement(st.initial, *points),
+                      "photo_error": photo_error(st.scene.frames, st.initial),
+                      "track_error": pose_track_error(st.scene.frames, *points), **pose_evidence(st.scene, cfg.mode),
                       "info": {"seconds": time.perf_counter() - start, "person_px": st.person_px}}  # fmt: skip
             record["info"]["raft_seconds"] = record["info"]["seconds"]  # the forward pass alone
             folder.mkdir(parents=True, exist_ok=True)

@@ -14,6 +14,11 @@ motion). The zoomed flow replaces RAFT's pixel by pixel where both hold:
   :func:`~lit_boot.bootstrap.selfcheck.choose_pixels`: its averaged error below ``(1 - margin)``
   x RAFT's and the pixel's own lower too); with ``confirm="none"`` nothing is asked of them.
 
+That choice is made coherent (:func:`coherent`: the zoomed flow
+only where most of a pixel's 3x3 neighbourhood chose it too; no speckle of single pixels), and the zoomed flow
+fades in over :data:`FADE_PX` px inside its region's sides (:func:`fade_in`; no step where the
+crop ends): the zoomed flow's weight, ``kept``, is in [0, 1] there.
+
 The result is the flow the flow stages start from and are checked against. The person's box per
 frame: the scene's ``person_boxes`` when it has them (a person detector), else the box around
 the pose's points (:func:`~lit_boot.flow.zoom.boxes_from_points`). A scene with several people
@@ -26,6 +31,7 @@ import time
 from typing import Any
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 from torchvision.models.optical_flow import RAFT
 
@@ -37,7 +43,7 @@ from .stage_configs import ZoomConfig
 from .evaluate import agreement, drift, photo_error
 from .selfcheck import CENSUS_RADIUS, choose_pixels
 
-__all__ = ["person_boxes", "box_masks", "keep_pixels", "zoom_flows", "zoom_stage", "zoom_line"]
+__all__ = ["person_boxes", "box_masks", "fade_in", "coherent", "keep_pixels", "zoom_flows", "zoom_stage", "zoom_line"]
 
 
 def person_boxes(scene: Scene, mode: str) -> Tensor:
@@ -59,6 +65,37 @@ def box_masks(boxes: Tensor, size: tuple[int, int]) -> Tensor:
             x0, y0, x1, y1 = box.tolist()
             masks[t, max(0, round(y0)) : max(0, round(y1) + 1), max(0, round(x0)) : max(0, round(x1) + 1)] = True
     return masks
+
+
+#: The zoomed flow fades in over this many px inside its region's sides (those inside the frame):
+#: no step where the crop ends (BENCHMARKS.md, "A flow a user can use").
+FADE_PX = 8
+
+
+def fade_in(region: tuple[int, int, int, int], size: tuple[int, int]) -> Tensor:
+    """(H, W) float in [0, 1]: 0 outside ``region`` (y0, y1, x0, x1) px and on its outermost rows
+    and columns, rising linearly to 1 at :data:`FADE_PX` px inside each side that lies inside the
+    frame ``size`` (H, W); a side on the frame's edge does not fade."""
+    height, width = size
+    y0, y1, x0, x1 = region
+    ys, xs = torch.arange(height, dtype=torch.float32)[:, None], torch.arange(width, dtype=torch.float32)[None]
+    far = torch.tensor(float("inf"))
+    inward = [ys - y0 if y0 > 0 else far, y1 - 1 - ys if y1 < height else far,
+              xs - x0 if x0 > 0 else far, x1 - 1 - xs if x1 < width else far]  # fmt: skip
+    reach = torch.minimum(torch.minimum(inward[0], inward[1]), torch.minimum(inward[2], inward[3]))
+    inside = (ys >= y0) & (ys < y1) & (xs >= x0) & (xs < x1)
+    return torch.where(inside, (reach / FADE_PX).clamp(0, 1), torch.zeros(()))
+
+
+def coherent(choice: Tensor) -> Tensor:
+    """A choice of a candidate flow made coherent: a pixel of (H, W) bool ``choice`` keeps the
+    candidate only where most of its 3x3 neighbourhood (itself included; at the frame's edge, of
+    the pixels inside it) chose it too. A choice made pixel by pixel on noisy evidence scatters
+    single pixels of the candidate inside the other flow, which a user who warps frames with the
+    flow sees as speckle; those go. A pixel the evidence refused is never given the candidate
+    (BENCHMARKS.md, "A flow a user can use")."""
+    votes = F.avg_pool2d(choice.float()[None, None], 3, stride=1, padding=1, count_include_pad=False)[0, 0]
+    return choice & (votes > 0.5)
 
 
 def keep_pixels(frames: Tensor, base: Tensor, candidate: Tensor, region: tuple[int, int, int, int],
@@ -93,7 +130,8 @@ def keep_pixels(frames: Tensor, base: Tensor, candidate: Tensor, region: tuple[i
 def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: ZoomConfig) -> tuple[Tensor, Tensor, dict[str, Any]]:
     """The zoom of every pair of ``scene``: ``base`` (T-1, 2, H, W) px RAFT's own flows, ``boxes``
     (T, 5) the person's. Returns (flows (T-1, 2, H, W) px: ``base`` with the zoomed flow where
-    it was kept, kept (T-1, H, W) bool, record). The record: ``kept_fraction`` (of all pixels),
+    it was kept, kept (T-1, H, W) float in [0, 1]: the zoomed flow's weight, record). The record:
+    ``kept_fraction`` (of all pixels),
     ``zoomed_pairs``, ``cost`` (zoomed pixels over the frames', summed over pairs: the zoom's
     cost in RAFT passes), ``seconds`` and ``per_pair`` (scale, motion px, crop, region, cost,
     kept fraction of the region), ``max_cost`` (frames). ``config.max_cost`` must be a number:
@@ -102,7 +140,7 @@ def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: Z
         raise ValueError("zoom.max_cost 'auto' depends on the mode: pass config.for_mode('3d' or '2d')")
     start = time.perf_counter()
     frames, flows = scene.frames, base.clone()
-    kept = torch.zeros(base.shape[0], *base.shape[-2:], dtype=torch.bool)
+    kept = torch.zeros(base.shape[0], *base.shape[-2:])
     per_pair = []
     for t, box in enumerate(pair_boxes(boxes)):
         zoomed = zoom_pair(model, frames[t], frames[t + 1], base[t], box, max_scale=config.max_scale,
@@ -113,10 +151,11 @@ def zoom_flows(model: RAFT, scene: Scene, base: Tensor, boxes: Tensor, config: Z
                            max_pixels=config.max_pixels)  # fmt: skip
         record = zoomed.record()
         if zoomed.region is not None:
-            kept[t] = keep_pixels(frames[t : t + 2], base[t], zoomed.candidate, zoomed.region, config)
-            flows[t] = torch.where(kept[t], zoomed.candidate, base[t])
+            chosen = coherent(keep_pixels(frames[t : t + 2], base[t], zoomed.candidate, zoomed.region, config))
+            kept[t] = chosen * fade_in(zoomed.region, tuple(base.shape[-2:]))
+            flows[t] = base[t] + kept[t] * (zoomed.candidate - base[t])
             y0, y1, x0, x1 = zoomed.region
-            record["kept_fraction"] = round(float(kept[t, y0:y1, x0:x1].float().mean()), 4)
+            record["kept_fraction"] = round(float(kept[t, y0:y1, x0:x1].mean()), 4)
         per_pair.append(record)
     record = {"kept_fraction": float(kept.float().mean()),
               "zoomed_pairs": sum(p["region"] is not None for p in per_pair),
@@ -143,7 +182,7 @@ def zoom_stage(raft: RAFT, scene: Scene, initial: Tensor, *, mode: str, config: 
     record = {**scene_flow_metrics(scene.gt, flows, scene.track_id), "drift_px": drift(flows, initial, person),
               "agreement_px": agreement(flows, *scene.pose_points(mode)),
               "photo_error": photo_error(scene.frames, flows), "info": {"zoom": zoom}}  # fmt: skip
-    return record, flows, {"painted": torch.zeros_like(kept), "kept": kept.float()}
+    return record, flows, {"painted": torch.zeros(kept.shape, dtype=torch.bool), "kept": kept}
 
 
 def _zoom_people(raft: RAFT, scene: Scene, initial: Tensor, mode: str,
@@ -159,7 +198,7 @@ def _zoom_people(raft: RAFT, scene: Scene, initial: Tensor, mode: str,
         one = scene.person(p)
         boxes = person_boxes(one, mode)
         flows, kept_p, record = zoom_flows(raft, one, flows, boxes, config)
-        kept = kept_p if kept is None else kept | kept_p
+        kept = kept_p if kept is None else torch.maximum(kept, kept_p)
         person |= box_masks(boxes, tuple(flows.shape[-2:]))
         records.append((one.track_id, record))
     if len(records) == 1:

@@ -283,12 +283,14 @@ class Scene:
 
     def pose_points(self, mode: str, threshold: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
         """The pose as image points in ``mode``: (T, K, 2) px float and a (T, K) bool of the
-        points that count. "3d": the 3D joints projected by the cameras (every joint counts);
-        "2d": the keypoints (those with confidence above ``threshold`` count)."""
+        points that count. "3d": the 3D joints projected by the cameras (every joint of the frames
+        where the pose was estimated, :meth:`~lit_boot.core.Person.posed`: elsewhere an
+        estimator's joints are a neighbour frame's, filled in); "2d": the keypoints (those with
+        confidence above ``threshold`` count)."""
         self.require_pose(mode)
         if mode == "3d":
             points = self.cameras.project(self.joints3d.float())
-            return points, torch.ones(points.shape[:2], dtype=torch.bool)
+            return points, Person.of(self).posed()[:, None].expand(points.shape[:2]).clone()
         conf = self.keypoints_conf
         keep = conf > threshold if conf is not None else torch.ones(self.keypoints2d.shape[:2], dtype=torch.bool)
         return self.keypoints2d.float(), keep

@@ -15,7 +15,7 @@ import lightning as L
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from ..core import Person, Scene, get_layout
+from ..core import Scene, get_layout
 from ..data import load_scene
 
 __all__ = ["POSE_SOURCES", "MODE_OF_SOURCE", "SketchInputs", "ScenePairs", "SceneFlowData"]
@@ -56,13 +56,12 @@ def sketch_inputs(scene: Scene, source: str = "auto") -> SketchInputs:
     if source in MODE_OF_SOURCE:
         mode = MODE_OF_SOURCE[source]
         try:
-            joints, _ = scene.pose_points(mode)
+            joints, keep = scene.pose_points(mode)
         except ValueError as err:
             raise ValueError(f"pose_source {source!r}: {err}") from None
         layout = scene.pose_layout(mode)
-        if mode == "3d":
-            depths = scene.joints3d[..., 2].float()
-            conf = _posed(scene, joints)
+        if mode == "3d":  # the frames with a pose (a filled-in pose, drawn, would say the person stood still)
+            depths, conf = scene.joints3d[..., 2].float(), keep.float()
         else:
             conf = scene.keypoints_conf
     else:
@@ -81,28 +80,21 @@ def sketch_inputs(scene: Scene, source: str = "auto") -> SketchInputs:
     )
 
 
-def _posed(person: Scene, joints: torch.Tensor) -> torch.Tensor:
-    """A 3D pose's confidences (T, J): 1 in the frames where the person's pose was estimated
-    (:meth:`~lit_boot.core.Person.posed`), 0 where its joints are only a neighbour frame's, filled
-    in (drawn, they would paint the neighbour's pose with no motion)."""
-    return Person.of(person).posed().float()[:, None].expand(joints.shape[:2])
-
-
 def _people_inputs(scene: Scene, mode: str) -> SketchInputs:
     """Every person's joints of ``mode`` (a person axis after the pair's). In 3D a person counts
-    in the frames where its pose was estimated (:func:`_posed`)."""
+    in the frames where its pose was estimated (:meth:`~lit_boot.core.Scene.pose_points`)."""
     joints, conf, depths = [], [], []
     for p in range(scene.num_people):
         person = scene.person(p)
         try:
-            points, _ = person.pose_points(mode)
+            points, keep = person.pose_points(mode)
         except ValueError as err:
             raise ValueError(f"pose_source {SOURCE_OF_MODE[mode]!r}, person {person.track_id}: {err}") from None
         joints.append(points.float())
         if mode == "2d":
             conf.append(person.keypoints_conf.float())
         else:
-            conf.append(_posed(person, points))
+            conf.append(keep.float())
             depths.append(person.joints3d[..., 2].float())
     joints, conf = torch.stack(joints, 1), torch.stack(conf, 1)
     return SketchInputs(layout=get_layout(scene.pose_layout(mode)).name, joints_t=joints[:-1], joints_t1=joints[1:],
