@@ -8,7 +8,8 @@ did (a no-GT measure a reader can trust where it agrees in sign on most scenes).
 
 Usage:
   python benchmarks/pose_evidence.py --synthetic /tmp/bootstrap_suite [--set validation] [--frames 8]
-  python benchmarks/pose_evidence.py --runs RUN_DIR [RUN_DIR ...]   # real windows, clips (no GT)
+  python benchmarks/pose_evidence.py --sintel /tmp/real_data/3d [--sintel-size 218,512]   # real_data.py's runs
+  python benchmarks/pose_evidence.py --runs RUN_DIR [RUN_DIR ...]   # runs of scene folders (clips; no GT)
 The synthetic folder is bootstrap_suite.py's --out (one <scene>_default run per scene).
 """
 
@@ -65,23 +66,40 @@ def synthetic(folder: Path, which: str, frames: int) -> list[tuple[str, dict]]:
     return rows
 
 
+def sintel(folder: Path, size: str) -> list[tuple[str, dict]]:
+    """The Sintel windows' runs under ``folder`` (real_data.py's --out/<mode>), each scene rebuilt
+    as real_data.py built it (MediaPipe and YOLOX-Nano on the full-size frames)."""
+    from real_data import SHARED, window_scene
+
+    rows = []
+    for run in sorted(p for p in folder.iterdir() if (p / "summary.json").is_file()):
+        shape = None if size == "full" else tuple(int(v) for v in size.split(","))
+        _, scene = window_scene(run.name, shape, str(SHARED / "checkpoints/yolox_nano.onnx"))
+        rows.append((run.name, before_after(run, scene)))
+    return rows
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--synthetic", default=None, help="bootstrap_suite.py's --out folder")
     p.add_argument("--set", default="validation", choices=("tuning", "validation"))
     p.add_argument("--frames", type=int, default=8)
     p.add_argument("--runs", nargs="*", default=[])
+    p.add_argument("--sintel", default=None, help="real_data.py's --out/<mode> folder of Sintel window runs")
+    p.add_argument("--sintel-size", default="218,512")
     p.add_argument("--json", default=None)
     args = p.parse_args()
     rows = synthetic(Path(args.synthetic), args.set, args.frames) if args.synthetic else []
+    rows += sintel(Path(args.sintel), args.sintel_size) if args.sintel else []
     rows += [(Path(r).name, before_after(Path(r))) for r in args.runs]
     rows = [(n, r) for n, r in rows if r]
     names = list(dict.fromkeys(k for _, r in rows for k in r))
     print("| run | " + " | ".join(names) + " |\n" + "| --- " * (len(names) + 1) + "|")
     for name, r in rows:
-        cells = [f"{r[k][0]:.3g} -> {r[k][1]:.3g}" if k in r else "" for k in names]
+        cells = [f"{r[k][0]:.3g} -> {r[k][1]:.3g}" if k in r and math.isfinite(r[k][0]) else "" for k in names]
         print(f"| {name} | " + " | ".join(cells) + " |")
-    change = {k: [100 * (r[k][1] / r[k][0] - 1) for _, r in rows if k in r and r[k][0]] for k in names}
+    change = {k: [100 * (r[k][1] / r[k][0] - 1) for _, r in rows
+                  if k in r and r[k][0] and math.isfinite(r[k][0] + r[k][1])] for k in names}  # fmt: skip
     print("\nmean change: " + ", ".join(f"{k} {sum(v) / len(v):+.1f}%" for k, v in change.items() if v))
     gt = next((k for k in GT_NAMES if k in names), None)
     if gt is not None:

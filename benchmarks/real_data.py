@@ -75,6 +75,16 @@ def window_with_boxes(window: str, size, detector: str, heldout_root: Path = HEL
     return scene, boxes
 
 
+def window_scene(window: str, size, detector: str | None, estimate: dict | None = None,
+                 heldout_root: Path = HELDOUT_ROOT):
+    """A Sintel window at ``size`` (H, W or None: full) with MediaPipe's poses (and the YOLOX
+    ``detector``'s boxes) estimated on its full-size frames (they miss small people), rescaled."""
+    root, name, first, last, pass_name = windows(heldout_root)[window]
+    poses = estimate_poses(read_sintel(root, name, first=first, last=last, pass_name=pass_name),
+                           detector=detector, **(estimate or {}))  # fmt: skip
+    return poses, poses.apply_to(read_sintel(root, name, first=first, last=last, size=size, pass_name=pass_name))
+
+
 def gt_pair_epe(flows: torch.Tensor, scene) -> dict[str, float]:
     """EPE over the pairs with GT, as Sintel reports it: "all" valid pixels, the "noc" (matched:
     valid, not occluded) and the "occ" (unmatched: valid, occluded in frame t+1)."""
@@ -134,7 +144,8 @@ def print_table(rows: list[dict]) -> None:
         for r in mine:
             ev = r["evidence"]
             census = f"{ev['raft']['person']:.2f} -> {ev['final']['person']:.2f}"
-            decided = "; ".join(f"{d['painted_fraction'] or 0:.3f}, {d['kept_tuned_fraction']:.2f}" for d in ev["decisions"])
+            decided = "; ".join(f"{d['painted_fraction'] or 0:.3f}, {d['kept_tuned_fraction']:.2f}"
+                                for d in ev["decisions"])  # fmt: skip
             epe = [_change(r, k) if "before" in r else "no GT" for k in ("all", "noc", "occ")]
             ran = f"{r.get('ran', '')} {'+'.join(r.get('stages', []))}"
             print(f"| {r['scene']} | {ran} | {r['frames']} ({r['found']}, {r.get('boxes', '')}) | {' | '.join(epe)} "
@@ -178,13 +189,8 @@ def main() -> None:
     detector = None if args.detector == "none" else args.detector
     if "sintel" in args.parts:
         size = None if args.sintel_size == "full" else tuple(int(v) for v in args.sintel_size.split(","))
-        windows = [(w, SHARED / "data/sintel_samples", w.rstrip("b"), a, b, "final") for w, a, b in SINTEL]
-        windows += [(w, Path(args.heldout_root), *rest) for w, *rest in HELDOUT]
-        for window, root, name, first, last, pass_name in (w for w in windows if w[0] in args.scenes.split(",")):
-            # MediaPipe (and the detector) on the full-size frames (they miss small people), rescaled to `size`
-            poses = estimate_poses(read_sintel(root, name, first=first, last=last, pass_name=pass_name),
-                                   detector=detector, **json.loads(args.estimate))  # fmt: skip
-            scene = poses.apply_to(read_sintel(root, name, first=first, last=last, size=size, pass_name=pass_name))
+        for window in (w for w in windows(Path(args.heldout_root)) if w in args.scenes.split(",")):
+            poses, scene = window_scene(window, size, detector, json.loads(args.estimate), Path(args.heldout_root))
             for mode in args.mode.split(","):
                 speed, result = run(scene, Path(args.out) / mode / window, mode, args, video=False)
                 # the detections on the GT pair's first frame, to judge them by eye (frame | GT flow | keypoints)

@@ -31,8 +31,8 @@ def boxes_only(scene):
     confidence 0, no 3D joints, a box in every frame."""
     points = scene.keypoints2d
     boxes = torch.cat([points.amin(1) - 2, points.amax(1) + 2, torch.ones(scene.num_frames, 1)], 1)
-    return dataclasses.replace(scene, joints3d=None, cameras=None, keypoints_conf=torch.zeros_like(scene.keypoints_conf),
-                               person_boxes=boxes)  # fmt: skip
+    nobody = torch.zeros_like(scene.keypoints_conf)
+    return dataclasses.replace(scene, joints3d=None, cameras=None, keypoints_conf=nobody, person_boxes=boxes)
 
 
 def test_each_stage_runs_where_its_evidence_is(scene):
@@ -68,7 +68,8 @@ def test_a_filled_3d_pose_is_not_drawn(scene):
     inputs = sketch_inputs(dataclasses.replace(scene, keypoints_conf=filled), "joints3d")
     assert inputs.confidence_t[:, 0].tolist() == [1.0, 1.0, 0.0]  # pair 2 -> 3 starts at the filled frame
     assert inputs.confidence_t1[:, 0].tolist() == [1.0, 0.0, 1.0]  # pair 1 -> 2 ends at it
-    assert Person.of(scene).posed().all() and not Person.of(dataclasses.replace(scene, keypoints_conf=filled)).posed()[2]
+    assert Person.of(scene).posed().all()
+    assert not Person.of(dataclasses.replace(scene, keypoints_conf=filled)).posed()[2]
 
 
 def test_a_filled_3d_pose_is_not_held_to_the_estimates(scene):

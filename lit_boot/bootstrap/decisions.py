@@ -27,8 +27,8 @@ import torch
 
 from ..data.atomic import atomic_write_bytes
 
-__all__ = ["save_mask", "load_mask", "save_decisions", "load_decisions", "final_decisions", "decision_summary", "decision_image",
-           "decision_map", "decision_key", "target_line", "DECISION_COLOURS"]
+__all__ = ["save_mask", "load_mask", "save_decisions", "load_decisions", "final_decisions", "decision_summary",
+           "decision_image", "decision_map", "decision_key", "target_line", "DECISION_COLOURS"]
 
 #: RGB of the painted target pixels, of where a tuned flow was kept and of where the zoom stage's
 #: zoomed flow was kept (RAFT's flow: the frame in grey).
