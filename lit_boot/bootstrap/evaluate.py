@@ -144,8 +144,9 @@ def pose_evidence(scene: Scene, mode: str) -> dict[str, float]:
     every person with the pose of ``mode`` under the bare names, and with several people each
     one's under ``<name>_person<track id>``. A measure with nothing to count is left out."""
     people = [scene.person(p) for p in range(scene.num_people)]
-    usable = [p for p in people if (p.joints3d is not None and p.cameras is not None) or mode == "2d"]
-    per = [(int(p.track_id), _sums(p, mode)) for p in usable if p.keypoints2d is not None or mode == "3d"]
+    has_pose = (lambda p: p.joints3d is not None and p.cameras is not None) if mode == "3d" else \
+        (lambda p: p.keypoints2d is not None)  # fmt: skip
+    per = [(int(p.track_id), _sums(p, mode)) for p in people if has_pose(p)]
     out: dict[str, float] = {}
     for name in POSE_EVIDENCE[mode]:
         total = sum(s[name][0] for _, s in per if name in s)

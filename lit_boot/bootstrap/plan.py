@@ -45,7 +45,7 @@ def _frames(person: Person, what: str) -> int:
     """Frames with the pose (``what`` "pose") or with a box (``what`` "box")."""
     if what == "box":
         return int((person.person_boxes[:, 4] > 0).sum()) if person.person_boxes is not None else 0
-    return int(person.posed().sum()) if person.keypoints_conf is not None or person.joints3d is not None else 0
+    return int(person.posed().sum())
 
 
 def plan_run(config: BootstrapConfig, scene: Scene) -> Plan:

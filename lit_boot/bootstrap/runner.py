@@ -261,12 +261,13 @@ class Bootstrap:
         if record is not None:
             st.initial = read_flows(folder / "flows.npz")
         else:
-            n = len(self.models)
-            log.info(stage_header(0, len(self.plan.stages), "initial", f"RAFT inference x{n} on {st.accelerator}"))
+            models = [self._model(m, st.person_px) for m in range(len(self.models))]
+            what = f"RAFT inference x{len(models)} on {st.accelerator}"
+            log.info(stage_header(0, len(self.plan.stages), "initial", what))
             start = time.perf_counter()
             try:
-                flows = [predict_flows(self._model(m, st.person_px), st.scene, accelerator=st.accelerator,
-                                       precision=st.precision) for m in range(n)]  # fmt: skip
+                flows = [predict_flows(model, st.scene, accelerator=st.accelerator, precision=st.precision)
+                         for model in models]  # fmt: skip
             except NonFiniteError as err:
                 raise NonFiniteError(f"{self.out}: pretrained RAFT's flow is not finite at precision {st.precision} "
                                      "(try precision 32-true)", err.fault) from None  # fmt: skip
@@ -283,14 +284,13 @@ class Bootstrap:
             folder.mkdir(parents=True, exist_ok=True)
             write_flows_npz(folder / "flows.npz", st.initial)
             if cfg.checking != "off":
-                models = [self._model(m, st.person_px) for m in range(len(self.models))]
-                unjudged = unjudged_flows(models, st.scene, st.initial, accelerator=st.accelerator,
-                                          precision=st.precision)  # fmt: skip
-                save_mask(folder / "unjudged.npz", unjudged)
+                st.unjudged = unjudged_flows(models, st.scene, st.initial, accelerator=st.accelerator,
+                                             precision=st.precision)  # fmt: skip
+                save_mask(folder / "unjudged.npz", st.unjudged)
                 record["info"]["seconds"] = time.perf_counter() - start
             self.folder.write_record("initial", record)
-        if cfg.checking != "off":
-            st.unjudged = load_mask(folder / "unjudged.npz") if (folder / "unjudged.npz").is_file() else None
+        if cfg.checking != "off" and st.unjudged is None and (folder / "unjudged.npz").is_file():
+            st.unjudged = load_mask(folder / "unjudged.npz")  # a resumed run's
         st.flows = st.reference = st.initial
         st.history.append(record)
         st.seconds["initial"] = record["info"]["seconds"]

@@ -73,9 +73,10 @@ class Person:
         camera are a neighbour frame's, filled in: no evidence of the pose in that frame."""
         if self.keypoints_conf is not None:
             return (self.keypoints_conf > 0).any(-1)
-        T = next(getattr(self, k).shape[0] for k in ("joints3d", "keypoints2d", "person_boxes")
-                 if getattr(self, k) is not None)  # fmt: skip
-        return torch.ones(T, dtype=torch.bool)
+        pose = self.joints3d if self.joints3d is not None else self.keypoints2d
+        if pose is not None:
+            return torch.ones(pose.shape[0], dtype=torch.bool)
+        return torch.zeros(self.person_boxes.shape[0], dtype=torch.bool)  # a box and no pose
 
     def found(self) -> torch.Tensor:
         """(T,) bool: frames where the person has a keypoint of confidence > 0 or a box."""
